@@ -1,0 +1,1 @@
+"""Render workers: optics core (``worker.optics``), Mitsuba integrator (``worker.render``), queue tasks."""

@@ -1,0 +1,62 @@
+"""Loading Mitsuba 3 with a working Dr.Jit backend and choosing the spectral variant.
+
+Dr.Jit's LLVM backend needs a recent libLLVM (Debian's ``libllvm19``; LLVM 14/15 crash), so the path is
+set through ``DRJIT_LIBLLVM_PATH`` before Mitsuba is imported. The variant is ``cuda_ad_spectral`` where
+an NVIDIA GPU is usable, else ``llvm_ad_spectral``; ``HGRENDER_VARIANT`` or an explicit argument wins.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+from types import ModuleType
+
+SUPPORTED_VARIANTS = ("llvm_ad_spectral", "cuda_ad_spectral")
+_LIBLLVM_PATTERNS = (
+    "/usr/lib/x86_64-linux-gnu/libLLVM.so.19*",
+    "/usr/lib/aarch64-linux-gnu/libLLVM.so.19*",
+    "/usr/lib/llvm-19/lib/libLLVM.so*",
+    "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",
+    "/usr/lib/aarch64-linux-gnu/libLLVM-19.so",
+)
+
+
+def find_libllvm() -> str | None:
+    """Path of a libLLVM 19 shared library, or None."""
+    for pattern in _LIBLLVM_PATTERNS:
+        matches = sorted(glob.glob(pattern))
+        if matches:
+            return matches[0]
+    return None
+
+
+def _cuda_available(mitsuba: ModuleType) -> bool:
+    if "cuda_ad_spectral" not in mitsuba.variants():
+        return False
+    try:
+        import drjit as dr
+
+        return bool(dr.has_backend(dr.JitBackend.CUDA))
+    except Exception:  # noqa: BLE001 - any failure to initialise CUDA means "no GPU"
+        return False
+
+
+def load_mitsuba(variant: str | None = None) -> ModuleType:
+    """Import Mitsuba, select a spectral variant and return the ``mitsuba`` module.
+
+    ``variant`` (or ``HGRENDER_VARIANT``) may be ``auto`` or one of ``SUPPORTED_VARIANTS``.
+    """
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        libllvm = find_libllvm()
+        if libllvm is not None:
+            os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    import mitsuba as mi
+
+    requested = variant or os.environ.get("HGRENDER_VARIANT", "auto")
+    if requested == "auto":
+        requested = "cuda_ad_spectral" if _cuda_available(mi) else "llvm_ad_spectral"
+    if requested not in SUPPORTED_VARIANTS:
+        raise ValueError(f"variant: {requested!r} is not one of {', '.join(SUPPORTED_VARIANTS)} or 'auto'")
+    if mi.variant() != requested:
+        mi.set_variant(requested)
+    return mi

@@ -1,0 +1,104 @@
+"""Array namespaces that let one formula run on NumPy arrays and inside Dr.Jit kernels.
+
+Every optics formula in ``worker.optics`` is written once against an ``ArrayOps`` namespace ``ops``:
+``NUMPY`` for the reference implementation and tests, ``DRJIT`` inside Mitsuba's ``llvm_ad_*`` /
+``cuda_ad_*`` symbolic loops. Only element-wise operations are used, so the same code vectorises in both.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ArrayOps:
+    """Element-wise maths for one array library. ``where(cond, a, b)`` selects a where cond holds."""
+
+    name: str
+    exp: Any
+    log: Any
+    sqrt: Any
+    sin: Any
+    cos: Any
+    atan2: Any
+    abs: Any
+    minimum: Any
+    maximum: Any
+    where: Any
+    floor: Any
+
+    def clip(self, value: Any, low: float, high: float) -> Any:
+        return self.minimum(self.maximum(value, low), high)
+
+
+NUMPY = ArrayOps(
+    name="numpy",
+    exp=np.exp,
+    log=np.log,
+    sqrt=np.sqrt,
+    sin=np.sin,
+    cos=np.cos,
+    atan2=np.arctan2,
+    abs=np.abs,
+    minimum=np.minimum,
+    maximum=np.maximum,
+    where=np.where,
+    floor=np.floor,
+)
+
+
+def drjit_ops() -> ArrayOps:
+    """The Dr.Jit namespace (imported lazily: the service uses the NumPy path and never loads Dr.Jit)."""
+    import drjit as dr
+
+    return ArrayOps(
+        name="drjit",
+        exp=dr.exp,
+        log=dr.log,
+        sqrt=dr.sqrt,
+        sin=dr.sin,
+        cos=dr.cos,
+        atan2=dr.atan2,
+        abs=dr.abs,
+        minimum=dr.minimum,
+        maximum=dr.maximum,
+        where=dr.select,
+        floor=dr.floor,
+    )
+
+
+def hermite_functions(u: Any, max_order: int, ops: ArrayOps = NUMPY) -> list[Any]:
+    """Normalised 1-D Hermite functions h_0(u) … h_max_order(u), dimensionless.
+
+    h_n(u) = (-1)^n e^{u²/2} dⁿ/duⁿ e^{-u²} / (π^{1/4} 2^{n/2} √n!)  — Eq. (5) in one dimension with Θ = 1,
+    so that ∫ h_n h_m du = δ_nm. Evaluated by the stable three-term recurrence
+    h_{n+1} = √(2/(n+1)) u h_n − √(n/(n+1)) h_{n−1}; no factorials or powers are formed.
+    """
+    h0 = ops.exp(-0.5 * u * u) * (math.pi**-0.25)
+    values = [h0]
+    if max_order >= 1:
+        values.append(math.sqrt(2.0) * u * h0)
+    for n in range(1, max_order):
+        values.append(math.sqrt(2.0 / (n + 1)) * u * values[n] - math.sqrt(n / (n + 1)) * values[n - 1])
+    return values
+
+
+def transverse_modes(mode_count: int) -> list[tuple[int, int]]:
+    """The first ``mode_count`` transverse HG modes (n, m) that a physical CSD can carry.
+
+    Only even orders n + m survive (§4, "The HG coefficients are real and of even order"); they are listed
+    by increasing order n + m, then decreasing n. Counts 1, 4, 9, 16 close the orders 0, 2, 4, 6.
+    """
+    if mode_count < 1:
+        raise ValueError(f"modes: must be at least 1, got {mode_count}")
+    modes: list[tuple[int, int]] = []
+    order = 0
+    while len(modes) < mode_count:
+        for n in range(order, -1, -1):
+            modes.append((n, order - n))
+        order += 2
+    return modes[:mode_count]
