@@ -37,7 +37,7 @@ def _cuda_available(mitsuba: ModuleType) -> bool:
         import drjit as dr
 
         return bool(dr.has_backend(dr.JitBackend.CUDA))
-    except Exception:  # noqa: BLE001 - any failure to initialise CUDA means "no GPU"
+    except Exception:  # any failure to initialise CUDA means "no GPU"
         return False
 
 
