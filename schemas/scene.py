@@ -1,0 +1,700 @@
+"""The hgrender scene model, schema ``hgrender/scene/v1`` (pydantic v2).
+
+One model for both front ends: JSON scenes validate straight into :class:`Scene`; USD stages are
+converted into it by :mod:`schemas.usd_import`. The renderer compiles it to Mitsuba
+(``worker/render/scene_compiler.py``).
+
+Units are part of every field name: metres for geometry (``_m``), nanometres for wavelengths
+(``_nm``), micrometres for film thickness, grating pitch, surface roughness and correlation length
+(``_um``), degrees (``_deg``), kelvin (``_k``), watts (``_w``), millimetres for camera optics (``_mm``).
+Vectors are 3-element lists ``[x, y, z]`` in a right-handed world with +Y up.
+
+Radiometry of emitters (see docs/scenes.md): an emitter's spectral radiance is
+``L(λ) = c · spectrum(λ)`` in W·m⁻²·sr⁻¹·nm⁻¹, uniform over its surface and Lambertian. Either
+``radiance_scale`` gives ``c`` directly, or ``power_w`` fixes ``c`` by the total radiant power over the
+film's wavelength range, ``power_w = π · A · c · ∫_{λmin}^{λmax} spectrum(λ) dλ`` (A: emitting area).
+
+Strictness: unknown fields are rejected (``extra="forbid"``), floats must be finite, strings are not
+coerced to numbers. :func:`schemas.validation.validate_scene` turns every error into a JSON pointer.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
+
+SCHEMA_ID = "hgrender/scene/v1"
+
+#: Material ids (keys of ``Scene.materials``) — safe as file names, URL parts and USD ``hg:id`` values.
+MATERIAL_ID_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
+
+#: Hard caps built into the schema; the deployment limits in :class:`schemas.limits.SceneLimits` are lower.
+ABSOLUTE_MAX_RESOLUTION_PX = 16384
+ABSOLUTE_MAX_SPP = 1 << 20
+
+
+class StrictModel(BaseModel):
+    """Base of every scene model: unknown fields rejected, finite floats, no string→number coercion."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, frozen=False)
+
+
+# --- scalar and vector types ---------------------------------------------------------------------
+
+PositiveFloat = Annotated[float, Field(gt=0.0)]
+NonNegativeFloat = Annotated[float, Field(ge=0.0)]
+UnitInterval = Annotated[float, Field(ge=0.0, le=1.0)]
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Matrix4 = Annotated[
+    list[Annotated[list[float], Field(min_length=4, max_length=4)]], Field(min_length=4, max_length=4)
+]
+ConductorName = Literal["Ag", "Au", "Cu", "Al"]
+GlassName = Literal["bk7", "fused_silica", "water"]
+#: A refractive index: a real number ≥ 1 or a named dispersive glass (Sellmeier / tabulated in the worker).
+RefractiveIndex = Annotated[float, Field(ge=1.0, le=10.0)] | GlassName
+PsdModel = Literal["gaussian", "abc"]
+
+
+def _check_direction(value: list[float], field_name: str) -> list[float]:
+    """Directions (normals, up vectors, axes) need a non-zero length; they are normalised by consumers."""
+    if math.fsum(c * c for c in value) <= 1e-24:
+        raise ValueError(f"{field_name} must be a non-zero vector")
+    return value
+
+
+def _check_affine_matrix(matrix: list[list[float]], field_name: str) -> list[list[float]]:
+    """A 4x4 row-major matrix acting on column vectors; it must be affine and invertible."""
+    if any(abs(a - b) > 1e-12 for a, b in zip(matrix[3], (0.0, 0.0, 0.0, 1.0), strict=True)):
+        raise ValueError(f"{field_name} last row must be [0, 0, 0, 1] (affine transform)")
+    (a, b, c), (d, e, f), (g, h, i) = (row[:3] for row in matrix[:3])
+    determinant = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if abs(determinant) < 1e-18:
+        raise ValueError(f"{field_name} is singular (determinant {determinant:g})")
+    return matrix
+
+
+# --- spectra -------------------------------------------------------------------------------------
+
+
+class ConstantSpectrum(StrictModel):
+    """A wavelength-independent value (unitless reflectance or relative emission)."""
+
+    type: Literal["constant"]
+    value: NonNegativeFloat
+
+
+class BlackbodySpectrum(StrictModel):
+    """Planck's law B_λ(T) in W·m⁻²·sr⁻¹·nm⁻¹ at ``temperature_k`` kelvin."""
+
+    type: Literal["blackbody"]
+    temperature_k: Annotated[float, Field(gt=0.0, le=1e6)]
+
+
+class D65Spectrum(StrictModel):
+    """CIE standard illuminant D65, relative spectral power normalised to 1 at 560 nm."""
+
+    type: Literal["d65"]
+
+
+CieFName = Literal["F1", "F2", "F3", "F4", "F5", "F6", "F7", "F8", "F9", "F10", "F11", "F12"]
+
+
+class CieFSpectrum(StrictModel):
+    """CIE fluorescent illuminant F1..F12 (CIE 15:2004), relative power normalised to 1 at 560 nm."""
+
+    type: Literal["cie_f"]
+    name: CieFName
+
+
+class TabulatedSpectrum(StrictModel):
+    """Piecewise-linear spectrum through (wavelength nm, value) samples; zero outside the table."""
+
+    type: Literal["tabulated"]
+    wavelengths_nm: Annotated[list[Annotated[float, Field(gt=0.0)]], Field(min_length=2, max_length=10000)]
+    values: Annotated[list[NonNegativeFloat], Field(min_length=2, max_length=10000)]
+
+    @field_validator("wavelengths_nm")
+    @classmethod
+    def _increasing(cls, wavelengths_nm: list[float]) -> list[float]:
+        if any(b <= a for a, b in itertools.pairwise(wavelengths_nm)):
+            raise ValueError("wavelengths_nm must be strictly increasing")
+        return wavelengths_nm
+
+    @model_validator(mode="after")
+    def _same_length(self) -> TabulatedSpectrum:
+        if len(self.values) != len(self.wavelengths_nm):
+            raise ValueError(
+                f"values has {len(self.values)} entries but wavelengths_nm has {len(self.wavelengths_nm)}"
+            )
+        return self
+
+
+Spectrum = Annotated[
+    ConstantSpectrum | BlackbodySpectrum | D65Spectrum | CieFSpectrum | TabulatedSpectrum,
+    Field(discriminator="type"),
+]
+
+
+def _reflectance_kind(value: Any) -> str:
+    return "spectrum" if isinstance(value, dict | BaseModel) else "value"
+
+
+#: A reflectance: a number in [0, 1] or a spectrum (whose values should stay in [0, 1]).
+Reflectance = Annotated[
+    Annotated[UnitInterval, Tag("value")] | Annotated[Spectrum, Tag("spectrum")],
+    Discriminator(_reflectance_kind),
+]
+
+
+# --- transforms ----------------------------------------------------------------------------------
+
+
+class Transform(StrictModel):
+    """An affine transform applied after a shape's own geometry.
+
+    Either ``matrix`` (4x4, row-major, acting on column vectors ``p' = M·p``) or the TRS form
+    ``p' = translate_m + R(rotate_axis, rotate_deg) · (scale ⊙ p)`` (scale first, then a right-handed
+    rotation of ``rotate_deg`` degrees about ``rotate_axis``, then translation) — not both.
+    """
+
+    translate_m: Vec3 | None = None
+    rotate_axis: Vec3 | None = None
+    rotate_deg: float | None = None
+    scale: PositiveFloat | Annotated[list[PositiveFloat], Field(min_length=3, max_length=3)] | None = None
+    matrix: Matrix4 | None = None
+
+    @model_validator(mode="after")
+    def _one_form(self) -> Transform:
+        trs_fields = ("translate_m", "rotate_axis", "rotate_deg", "scale")
+        uses_trs = any(getattr(self, name) is not None for name in trs_fields)
+        if self.matrix is not None:
+            if uses_trs:
+                raise ValueError("matrix cannot be combined with translate_m/rotate_axis/rotate_deg/scale")
+            _check_affine_matrix(self.matrix, "matrix")
+        elif not uses_trs:
+            raise ValueError("transform needs matrix or at least one of translate_m, rotate_deg, scale")
+        if (self.rotate_deg is None) != (self.rotate_axis is None):
+            raise ValueError("rotate_axis and rotate_deg must be given together")
+        if self.rotate_axis is not None:
+            _check_direction(self.rotate_axis, "rotate_axis")
+        return self
+
+    def to_matrix(self) -> list[list[float]]:
+        """The equivalent 4x4 row-major matrix (Rodrigues' rotation formula for the TRS form)."""
+        if self.matrix is not None:
+            return [list(row) for row in self.matrix]
+        scale = self.scale if self.scale is not None else 1.0
+        sx, sy, sz = (scale, scale, scale) if isinstance(scale, float | int) else scale
+        rotation = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+        if self.rotate_axis is not None and self.rotate_deg is not None:
+            norm = math.sqrt(math.fsum(c * c for c in self.rotate_axis))
+            x, y, z = (c / norm for c in self.rotate_axis)
+            angle_rad = math.radians(self.rotate_deg)
+            c, s = math.cos(angle_rad), math.sin(angle_rad)
+            t = 1.0 - c
+            rotation = [
+                [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+                [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+                [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
+            ]
+        translate = self.translate_m if self.translate_m is not None else [0.0, 0.0, 0.0]
+        return [
+            [rotation[r][0] * sx, rotation[r][1] * sy, rotation[r][2] * sz, translate[r]] for r in range(3)
+        ] + [[0.0, 0.0, 0.0, 1.0]]
+
+
+# --- camera and film -----------------------------------------------------------------------------
+
+
+class PerspectiveCamera(StrictModel):
+    """A pinhole camera.
+
+    Placement: ``origin_m`` + ``target_m`` + ``up`` (look-at), or ``to_world`` — a 4x4 row-major
+    camera-to-world matrix in Mitsuba's camera convention (camera looks along local +Z, +Y is up,
+    +X points to the image's left). Field of view: ``fov_deg`` (horizontal, degrees) or
+    ``focal_length_mm`` + ``sensor_width_mm`` (horizontal fov = 2·atan(sensor_width / (2·focal_length)));
+    when neither is given the horizontal fov is 40°.
+    """
+
+    type: Literal["perspective"] = "perspective"
+    origin_m: Vec3 | None = None
+    target_m: Vec3 | None = None
+    up: Vec3 = Field(default_factory=lambda: [0.0, 1.0, 0.0])
+    to_world: Matrix4 | None = None
+    fov_deg: Annotated[float, Field(gt=0.0, lt=180.0)] | None = None
+    focal_length_mm: PositiveFloat | None = None
+    sensor_width_mm: PositiveFloat | None = None
+    near_clip_m: PositiveFloat = 1e-3
+    far_clip_m: PositiveFloat = 1e4
+
+    @model_validator(mode="after")
+    def _consistent(self) -> PerspectiveCamera:
+        has_look_at = self.origin_m is not None or self.target_m is not None
+        if self.to_world is not None:
+            if has_look_at:
+                raise ValueError("to_world cannot be combined with origin_m/target_m")
+            _check_affine_matrix(self.to_world, "to_world")
+        else:
+            if self.origin_m is None or self.target_m is None:
+                raise ValueError("camera needs origin_m and target_m (or to_world)")
+            view = [t - o for t, o in zip(self.target_m, self.origin_m, strict=True)]
+            _check_direction(view, "target_m - origin_m")
+            _check_direction(self.up, "up")
+            cross = [
+                view[1] * self.up[2] - view[2] * self.up[1],
+                view[2] * self.up[0] - view[0] * self.up[2],
+                view[0] * self.up[1] - view[1] * self.up[0],
+            ]
+            if math.fsum(c * c for c in cross) <= 1e-18 * math.fsum(c * c for c in view):
+                raise ValueError("up must not be parallel to the viewing direction target_m - origin_m")
+        has_lens = self.focal_length_mm is not None or self.sensor_width_mm is not None
+        if has_lens and self.fov_deg is not None:
+            raise ValueError("give fov_deg or focal_length_mm + sensor_width_mm, not both")
+        if has_lens and (self.focal_length_mm is None or self.sensor_width_mm is None):
+            raise ValueError("focal_length_mm and sensor_width_mm must be given together")
+        if self.far_clip_m <= self.near_clip_m:
+            raise ValueError("far_clip_m must be greater than near_clip_m")
+        return self
+
+    def horizontal_fov_deg(self) -> float:
+        """The horizontal field of view in degrees, whichever way it was specified."""
+        if self.fov_deg is not None:
+            return self.fov_deg
+        if self.focal_length_mm is not None and self.sensor_width_mm is not None:
+            return math.degrees(2.0 * math.atan(self.sensor_width_mm / (2.0 * self.focal_length_mm)))
+        return 40.0
+
+
+class Film(StrictModel):
+    """Image size and sampling: ``bands`` spectral bins spanning [wavelength_min_nm, wavelength_max_nm]."""
+
+    width: Annotated[int, Field(ge=1, le=ABSOLUTE_MAX_RESOLUTION_PX)] = 64
+    height: Annotated[int, Field(ge=1, le=ABSOLUTE_MAX_RESOLUTION_PX)] = 64
+    bands: Annotated[int, Field(ge=1, le=64)] = 16
+    wavelength_min_nm: Annotated[float, Field(ge=200.0, le=2500.0)] = 380.0
+    wavelength_max_nm: Annotated[float, Field(ge=200.0, le=2500.0)] = 780.0
+    spp: Annotated[int, Field(ge=1, le=ABSOLUTE_MAX_SPP)] = 64
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
+    #: Number of HG modes per interaction (1 = the paper's 0th-order approximation; Fig. 9 uses 16).
+    modes: Annotated[int, Field(ge=1, le=16)] = 1
+    max_depth: Annotated[int, Field(ge=1, le=64)] = 8
+
+    @model_validator(mode="after")
+    def _range(self) -> Film:
+        if self.wavelength_max_nm <= self.wavelength_min_nm:
+            raise ValueError("wavelength_max_nm must be greater than wavelength_min_nm")
+        return self
+
+
+# --- emitters ------------------------------------------------------------------------------------
+
+
+class _EmitterBase(StrictModel):
+    """Shared by all emitters: a spectrum and exactly one of ``power_w`` / ``radiance_scale``."""
+
+    spectrum: Spectrum
+    power_w: PositiveFloat | None = None
+    radiance_scale: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _one_intensity(self) -> _EmitterBase:
+        if (self.power_w is None) == (self.radiance_scale is None):
+            raise ValueError("give exactly one of power_w (total radiant power, W) or radiance_scale")
+        return self
+
+
+class SphereEmitter(_EmitterBase):
+    """A sphere emitting outwards from every surface point (area 4πR²)."""
+
+    type: Literal["sphere"]
+    center_m: Vec3
+    radius_m: PositiveFloat
+
+
+class CylinderEmitter(_EmitterBase):
+    """An open cylinder (side surface only, no caps; area 2πRL) with axis from ``p0_m`` to ``p1_m``."""
+
+    type: Literal["cylinder"]
+    p0_m: Vec3
+    p1_m: Vec3
+    radius_m: PositiveFloat
+
+    @model_validator(mode="after")
+    def _axis(self) -> CylinderEmitter:
+        _check_direction([b - a for a, b in zip(self.p0_m, self.p1_m, strict=True)], "p1_m - p0_m")
+        return self
+
+
+class RectangleEmitter(_EmitterBase):
+    """A one-sided rectangle emitting on the ``normal`` side.
+
+    ``height_m`` runs along ``up`` (projected onto the plane), ``width_m`` along ``up × normal``.
+    """
+
+    type: Literal["rectangle"]
+    center_m: Vec3
+    normal: Vec3
+    up: Vec3
+    width_m: PositiveFloat
+    height_m: PositiveFloat
+
+    @model_validator(mode="after")
+    def _frame(self) -> RectangleEmitter:
+        _check_rectangle_frame(self.normal, self.up)
+        return self
+
+
+class DiskEmitter(_EmitterBase):
+    """A one-sided disk emitting on the ``normal`` side."""
+
+    type: Literal["disk"]
+    center_m: Vec3
+    normal: Vec3
+    radius_m: PositiveFloat
+
+    @model_validator(mode="after")
+    def _frame(self) -> DiskEmitter:
+        _check_direction(self.normal, "normal")
+        return self
+
+
+def _check_rectangle_frame(normal: list[float], up: list[float]) -> None:
+    _check_direction(normal, "normal")
+    _check_direction(up, "up")
+    cross = [
+        up[1] * normal[2] - up[2] * normal[1],
+        up[2] * normal[0] - up[0] * normal[2],
+        up[0] * normal[1] - up[1] * normal[0],
+    ]
+    if math.fsum(c * c for c in cross) <= 1e-18 * math.fsum(c * c for c in up) * math.fsum(
+        c * c for c in normal
+    ):
+        raise ValueError("up must not be parallel to normal")
+
+
+Emitter = Annotated[
+    SphereEmitter | CylinderEmitter | RectangleEmitter | DiskEmitter, Field(discriminator="type")
+]
+
+
+# --- shapes --------------------------------------------------------------------------------------
+
+
+class _ShapeBase(StrictModel):
+    """Shared by all shapes: the id of a material in ``Scene.materials`` and an optional transform."""
+
+    material: str
+    transform: Transform | None = None
+
+
+class SphereShape(_ShapeBase):
+    type: Literal["sphere"]
+    center_m: Vec3
+    radius_m: PositiveFloat
+
+
+class CylinderShape(_ShapeBase):
+    """An open cylinder (side surface only, no caps) with axis from ``p0_m`` to ``p1_m``."""
+
+    type: Literal["cylinder"]
+    p0_m: Vec3
+    p1_m: Vec3
+    radius_m: PositiveFloat
+
+    @model_validator(mode="after")
+    def _axis(self) -> CylinderShape:
+        _check_direction([b - a for a, b in zip(self.p0_m, self.p1_m, strict=True)], "p1_m - p0_m")
+        return self
+
+
+class RectangleShape(_ShapeBase):
+    """A two-sided rectangle; ``height_m`` along ``up``, ``width_m`` along ``up × normal``."""
+
+    type: Literal["rectangle"]
+    center_m: Vec3
+    normal: Vec3
+    up: Vec3
+    width_m: PositiveFloat
+    height_m: PositiveFloat
+
+    @model_validator(mode="after")
+    def _frame(self) -> RectangleShape:
+        _check_rectangle_frame(self.normal, self.up)
+        return self
+
+
+class DiskShape(_ShapeBase):
+    type: Literal["disk"]
+    center_m: Vec3
+    normal: Vec3
+    radius_m: PositiveFloat
+
+    @model_validator(mode="after")
+    def _frame(self) -> DiskShape:
+        _check_direction(self.normal, "normal")
+        return self
+
+
+class MeshShape(_ShapeBase):
+    """An inline triangle mesh: vertex positions (m), triangles as vertex-index triples, optional normals."""
+
+    type: Literal["mesh"]
+    vertices_m: Annotated[list[Vec3], Field(min_length=3)]
+    indices: Annotated[
+        list[Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=3, max_length=3)]],
+        Field(min_length=1),
+    ]
+    normals: list[Vec3] | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> MeshShape:
+        vertex_count = len(self.vertices_m)
+        for triangle_index, triangle in enumerate(self.indices):
+            if max(triangle) >= vertex_count:
+                raise ValueError(
+                    f"indices[{triangle_index}] refers to vertex {max(triangle)} but there are "
+                    f"{vertex_count} vertices"
+                )
+        if self.normals is not None and len(self.normals) != vertex_count:
+            raise ValueError(
+                f"normals has {len(self.normals)} entries, expected one per vertex ({vertex_count})"
+            )
+        return self
+
+
+class MeshFileShape(_ShapeBase):
+    """A triangle mesh from an ``.obj`` or ``.ply`` file inside the uploaded scene bundle."""
+
+    type: Literal["mesh_file"]
+    path: Annotated[str, Field(min_length=1, max_length=255)]
+
+    @field_validator("path")
+    @classmethod
+    def _relative_inside_bundle(cls, path: str) -> str:
+        return check_bundle_relative_path(path, suffixes=(".obj", ".ply"))
+
+
+def check_bundle_relative_path(path: str, suffixes: tuple[str, ...] | None = None) -> str:
+    """Reject anything that could leave the bundle directory: absolute paths, ``..``, URLs, drives."""
+    if "\\" in path or "\x00" in path:
+        raise ValueError("path must use '/' separators and no NUL characters")
+    if re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:", path):
+        raise ValueError(f"path must be relative to the bundle, not a URL or drive ({path!r})")
+    if path.startswith("/"):
+        raise ValueError(f"path must be relative to the bundle, not absolute ({path!r})")
+    if any(part in ("..", "") for part in path.split("/")):
+        raise ValueError(f"path must stay inside the bundle (no '..' or empty components) ({path!r})")
+    if suffixes is not None and not path.lower().endswith(suffixes):
+        raise ValueError(f"path must end with one of {', '.join(suffixes)} ({path!r})")
+    return path
+
+
+Shape = Annotated[
+    SphereShape | CylinderShape | RectangleShape | DiskShape | MeshShape | MeshFileShape,
+    Field(discriminator="type"),
+]
+
+
+# --- materials -----------------------------------------------------------------------------------
+
+
+class _ScatteringMaterial(StrictModel):
+    """Non-specular materials: radius of the coherent scattering region of a path vertex (docs/physics.md)."""
+
+    scattering_region_radius_m: PositiveFloat = 1e-3
+
+
+class DiffuseMaterial(_ScatteringMaterial):
+    type: Literal["diffuse"]
+    reflectance: Reflectance = 0.5
+
+
+class MirrorMaterial(StrictModel):
+    """A perfectly specular conductor; keeps the incident coherence (Θ unchanged, r accumulates)."""
+
+    type: Literal["mirror"]
+    conductor: ConductorName | Literal["perfect"] = "perfect"
+
+
+class DielectricMaterial(StrictModel):
+    """A smooth dielectric interface (glass); perfectly specular like the mirror."""
+
+    type: Literal["dielectric"]
+    ior: RefractiveIndex = 1.5
+    exterior_ior: Annotated[float, Field(ge=1.0, le=10.0)] = 1.0
+
+
+class _RoughSurface(_ScatteringMaterial):
+    """Statistical rough surface (Eq. 15): RMS height, correlation length and PSD model.
+
+    ``gaussian``: PSD ∝ exp(−(π·ℓ·f)²); ``abc``: PSD ∝ (1 + (ℓ·f)²)^(−psd_exponent/2) (K-correlation).
+    """
+
+    roughness_rms_um: Annotated[float, Field(gt=0.0, le=100.0)]
+    correlation_length_um: Annotated[float, Field(gt=0.0, le=1e4)]
+    psd: PsdModel = "gaussian"
+    psd_exponent: Annotated[float, Field(gt=1.0, le=10.0)] = 2.0
+
+
+class RoughConductorMaterial(_RoughSurface):
+    type: Literal["rough_conductor"]
+    conductor: ConductorName
+
+
+class RoughDielectricMaterial(_RoughSurface):
+    type: Literal["rough_dielectric"]
+    ior: RefractiveIndex = 1.5
+    exterior_ior: Annotated[float, Field(ge=1.0, le=10.0)] = 1.0
+
+
+class ConductorSubstrate(StrictModel):
+    conductor: ConductorName
+
+
+class DielectricSubstrate(StrictModel):
+    ior: RefractiveIndex
+
+
+def _substrate_kind(value: Any) -> str:
+    if isinstance(value, dict):
+        return "conductor" if "conductor" in value else "dielectric"
+    return "conductor" if isinstance(value, ConductorSubstrate) else "dielectric"
+
+
+Substrate = Annotated[
+    Annotated[ConductorSubstrate, Tag("conductor")] | Annotated[DielectricSubstrate, Tag("dielectric")],
+    Discriminator(_substrate_kind),
+]
+
+
+class ThinFilmMaterial(_ScatteringMaterial):
+    """A thin dielectric film over a substrate (Eq. 18), on a weakly rough interface (Eq. 15)."""
+
+    type: Literal["thin_film"]
+    film_thickness_um: Annotated[float, Field(gt=0.0, le=100.0)]
+    film_ior: RefractiveIndex
+    substrate: Substrate
+    roughness_rms_um: Annotated[float, Field(gt=0.0, le=100.0)] = 0.05
+    correlation_length_um: Annotated[float, Field(gt=0.0, le=1e4)] = 5.0
+    psd: PsdModel = "gaussian"
+    psd_exponent: Annotated[float, Field(gt=1.0, le=10.0)] = 2.0
+    #: Number of multiply-reflected beams summed in the film (2 = the paper's two-beam form).
+    beams: Annotated[int, Field(ge=2, le=8)] = 4
+
+
+#: Optical-disc presets: track pitch (µm) and pit depth (nm) — CD: 1.6 µm, DVD: 0.74 µm (ECMA-130/267).
+GRATING_PRESETS: dict[str, dict[str, float]] = {
+    "cd": {"pitch_um": 1.6, "pit_depth_nm": 125.0},
+    "dvd": {"pitch_um": 0.74, "pit_depth_nm": 105.0},
+}
+DEFAULT_PIT_DEPTH_NM = 100.0
+
+
+class GratingMaterial(_ScatteringMaterial):
+    """A reflective diffraction grating (Eq. 20): 1-D (``pitch_um``) or 2-D (+ ``pitch_y_um``).
+
+    With a ``preset`` the pitch and pit depth default to the preset's values (explicit fields win);
+    after validation ``pitch_um`` and ``pit_depth_nm`` are always set.
+    """
+
+    type: Literal["grating"]
+    preset: Literal["cd", "dvd"] | None = None
+    pitch_um: Annotated[float, Field(gt=0.0, le=1000.0)] | None = None
+    pitch_y_um: Annotated[float, Field(gt=0.0, le=1000.0)] | None = None
+    orientation_deg: float = 0.0
+    duty: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.5
+    pit_depth_nm: Annotated[float, Field(ge=0.0, le=1e5)] | None = None
+    pit_ior: Annotated[float, Field(ge=1.0, le=10.0)] = 1.55
+    lobe_width_per_um: Annotated[float, Field(gt=0.0, le=100.0)] = 0.05
+    conductor: ConductorName = "Al"
+    max_order: Annotated[int, Field(ge=0, le=32)] = 3
+
+    @model_validator(mode="after")
+    def _resolve_preset(self) -> GratingMaterial:
+        if self.preset is not None:
+            preset = GRATING_PRESETS[self.preset]
+            if self.pitch_um is None:
+                self.pitch_um = preset["pitch_um"]
+            if self.pit_depth_nm is None:
+                self.pit_depth_nm = preset["pit_depth_nm"]
+        if self.pitch_um is None:
+            raise ValueError("pitch_um is required when no preset is given")
+        if self.pit_depth_nm is None:
+            self.pit_depth_nm = DEFAULT_PIT_DEPTH_NM
+        return self
+
+
+Material = Annotated[
+    DiffuseMaterial
+    | MirrorMaterial
+    | DielectricMaterial
+    | RoughConductorMaterial
+    | RoughDielectricMaterial
+    | ThinFilmMaterial
+    | GratingMaterial,
+    Field(discriminator="type"),
+]
+
+MaterialId = Annotated[str, Field(pattern=MATERIAL_ID_PATTERN)]
+
+
+# --- scene ---------------------------------------------------------------------------------------
+
+
+class Scene(StrictModel):
+    """A complete scene, schema ``hgrender/scene/v1``.
+
+    The ``schema`` key is held in the attribute ``schema_`` (``schema`` would shadow a BaseModel method).
+    """
+
+    schema_: Literal["hgrender/scene/v1"] = Field(alias="schema")
+    name: Annotated[str, Field(max_length=200)] = "untitled"
+    camera: PerspectiveCamera
+    film: Film = Field(default_factory=Film)
+    materials: dict[MaterialId, Material]
+    shapes: list[Shape] = Field(default_factory=list)
+    emitters: Annotated[list[Emitter], Field(min_length=1)]
+
+    model_config = ConfigDict(
+        title="hgrender scene v1",
+        extra="forbid",
+        allow_inf_nan=False,
+        strict=True,
+        populate_by_name=True,
+        serialize_by_alias=True,
+    )
+
+    @model_validator(mode="after")
+    def _material_references(self) -> Scene:
+        problems = [
+            {"pointer": f"/shapes/{index}/material", "message": f"unknown material {shape.material!r}"}
+            for index, shape in enumerate(self.shapes)
+            if shape.material not in self.materials
+        ]
+        if problems:
+            raise PydanticCustomError(
+                "scene_reference",
+                "{summary}",
+                {
+                    "summary": "; ".join(f"{p['pointer']}: {p['message']}" for p in problems),
+                    "problems": problems,
+                },
+            )
+        return self
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The scene as a JSON-compatible dict (unset optionals omitted) that validates back equal."""
+        return self.model_dump(mode="json", by_alias=True, exclude_none=True)
