@@ -1,0 +1,331 @@
+"""Sourced light (Eq. 14): transverse covariance Σ⊥ of an emitter seen from a far receiver, and its HG modes.
+
+A uniformly radiating emitter has f̃_σ ∝ F{1_X} (§5.1 "Light sources"): seen from a far receiver along the
+unit direction d it is a uniform patch of intensity over its silhouette, whose second moments Σ⊥ (m², in the
+transverse frame of d) give the shape matrix Θ = Σ⊥⁻¹ (Lemma 4.4 with its sign, see ``coherence``):
+
+* sphere, radius R: a uniform disk, Σ = R²/4 · I.
+* disk, radius R, unit normal n: the foreshortened disk, Σ = R²/4 (I − n⊥n⊥ᵀ), n⊥ = (n·x, n·y);
+  eigenvalues R²/4 and R²cos²θ/4 with cosθ = |n·d|.
+* rectangle w × h with unit edge axes u, v: an affine image of a uniform rectangle is a uniform
+  parallelogram, so Σ = w²/12 u⊥u⊥ᵀ + h²/12 v⊥v⊥ᵀ exactly.
+* gaussian, std σ: Σ = σ² I (the exact van Cittert–Zernike case).
+* finite cylinder, radius R, length L, unit axis a, sinθ = |a⊥|: the silhouette is a rectangle ℓ = L sinθ
+  (along û = a⊥/|a⊥|) × 2R (along v̂ ⟂ û) capped by two half-ellipses with semi-axes b = R|cosθ| (along û)
+  and R (along v̂). With A_r = 2Rℓ and A_c = πRb (both caps), a half-ellipse's centroid offset 4b/(3π) and
+  second moments b²/4 (along û) and R²/4 (along v̂):
+      Σ_uu = [A_r ℓ²/12 + A_c (ℓ²/4 + 4bℓ/(3π) + b²/4)] / (A_r + A_c),
+      Σ_vv = [A_r R²/3 + A_c R²/4] / (A_r + A_c),   Σ_uv = 0.
+  End-on (ℓ = 0) this is the disk R²/4 I; side-on (b = 0) the strip diag(L²/12, R²/3).
+
+The ``*_covariance_components`` functions take sizes and 3-vectors of scalars/arrays and return
+(Σ_xx, Σ_xy, Σ_yy) in the frame of the given transverse axes, on NumPy or inside Dr.Jit kernels.
+
+HG coefficients (Eq. 14): c_nm = ⟨f̃/f̃(0) | Ψ̃^Θ_nm⟩. In the whitened coordinates u of Σ's principal frame
+(``coherence.degree_of_coherence``) Θ becomes I, the basis is h_n(u₁)h_m(u₂) and the normalised angular
+coherence of each kind is a universal function, so its coefficients ĉ_nm are constants per kind:
+  disk (sphere, disk):          2J₁(v)/v with v = 2|u|   (Σ = R²/4 ⇒ v = R|k ξ/r| = 2|u|),
+  rect (rectangle, cylinder):   sinc(√3 u₁) sinc(√3 u₂)  (w²/12 ⇒ w ζ/2 = √3 u),
+  gaussian:                     exp(−|u|²/2).
+A cylinder uses the rectangle kind: side-on (Fig. 7's case) its silhouette is the uniform strip 2R × L; for
+oblique views only the 0th mode, which depends on Σ alone, is exact. The rectangle's whitened square is
+assumed aligned with Σ's principal axes (a rectangle seen face-on, or its edges' projections orthogonal).
+Coefficients are normalised so that Σ ĉ h_n(0) h_m(0) = 1, i.e. μ(0) = 1.
+
+Numeric path for tabulated emission: ``covariance_from_intensity_image`` (moments of a pixel image) and
+``covariance_from_angular_coherence`` (finite differences of ln f̃ at 0, Theorem 5.1(ii)).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+from scipy.special import j1
+
+from worker.optics.array_ops import NUMPY, ArrayOps, hermite_functions
+from worker.optics.expansion import project_csd
+from worker.optics.frames import Vector3, cross3, dot3, transverse_frame, unit_vector
+
+SOURCE_KINDS = ("sphere", "cylinder", "disk", "rect", "gaussian")
+# Which universal angular-coherence function each source kind is expanded with (module docstring).
+COEFFICIENT_KIND = {
+    "sphere": "disk",
+    "disk": "disk",
+    "cylinder": "rect",
+    "rect": "rect",
+    "gaussian": "gaussian",
+}
+MAX_MODES = 64
+
+# Below this squared length of the projected cylinder axis the view is end-on: Σ is isotropic R²/4 and the
+# projected axis direction û (a division by |a⊥|) is undefined and not needed.
+_END_ON_AXIS_SQUARED = 1e-12
+
+
+def sphere_covariance_components(radius_m: Any) -> tuple[Any, Any, Any]:
+    """Σ⊥ of a uniformly radiating sphere: a uniform disk of radius R, R²/4 · I (m²)."""
+    variance = 0.25 * radius_m * radius_m
+    return variance, 0.0 * variance, variance
+
+
+def gaussian_covariance_components(sigma_m: Any) -> tuple[Any, Any, Any]:
+    """Σ⊥ of a Gaussian emitter of standard deviation σ: σ² I (m²)."""
+    variance = sigma_m * sigma_m
+    return variance, 0.0 * variance, variance
+
+
+def disk_covariance_components(
+    radius_m: Any, normal: Vector3, x_axis: Vector3, y_axis: Vector3
+) -> tuple[Any, Any, Any]:
+    """Σ⊥ = R²/4 (I − n⊥n⊥ᵀ) of a uniform disk with unit ``normal`` (m², in the frame of x_axis/y_axis)."""
+    variance = 0.25 * radius_m * radius_m
+    normal_x = dot3(normal, x_axis)
+    normal_y = dot3(normal, y_axis)
+    return (
+        variance * (1.0 - normal_x * normal_x),
+        -variance * normal_x * normal_y,
+        variance * (1.0 - normal_y * normal_y),
+    )
+
+
+def rectangle_covariance_components(
+    width_m: Any, height_m: Any, u_axis: Vector3, v_axis: Vector3, x_axis: Vector3, y_axis: Vector3
+) -> tuple[Any, Any, Any]:
+    """Σ⊥ = w²/12 u⊥u⊥ᵀ + h²/12 v⊥v⊥ᵀ of a uniform w × h rectangle with unit edges u (width), v (height)."""
+    width_variance = width_m * width_m / 12.0
+    height_variance = height_m * height_m / 12.0
+    u_x, u_y = dot3(u_axis, x_axis), dot3(u_axis, y_axis)
+    v_x, v_y = dot3(v_axis, x_axis), dot3(v_axis, y_axis)
+    return (
+        width_variance * u_x * u_x + height_variance * v_x * v_x,
+        width_variance * u_x * u_y + height_variance * v_x * v_y,
+        width_variance * u_y * u_y + height_variance * v_y * v_y,
+    )
+
+
+def cylinder_silhouette_moments(
+    radius_m: Any, length_m: Any, sin_theta: Any, cos_theta: Any
+) -> tuple[Any, Any]:
+    """(Σ_uu, Σ_vv) of a finite cylinder's uniform silhouette (module docstring), m².
+
+    ``sin_theta``/``cos_theta``: of the angle between the cylinder axis and the line of sight (cosθ ≥ 0).
+    """
+    projected_length = length_m * sin_theta
+    cap_semi_axis = radius_m * cos_theta
+    rectangle_area = 2.0 * radius_m * projected_length
+    caps_area = math.pi * radius_m * cap_semi_axis
+    total_area = rectangle_area + caps_area
+    sigma_uu = (
+        rectangle_area * projected_length * projected_length / 12.0
+        + caps_area
+        * (
+            0.25 * projected_length * projected_length
+            + 4.0 * cap_semi_axis * projected_length / (3.0 * math.pi)
+            + 0.25 * cap_semi_axis * cap_semi_axis
+        )
+    ) / total_area
+    sigma_vv = radius_m * radius_m * (rectangle_area / 3.0 + caps_area / 4.0) / total_area
+    return sigma_uu, sigma_vv
+
+
+def cylinder_covariance_components(
+    radius_m: Any, length_m: Any, axis: Vector3, x_axis: Vector3, y_axis: Vector3, ops: ArrayOps = NUMPY
+) -> tuple[Any, Any, Any]:
+    """Σ⊥ = Σ_vv I + (Σ_uu − Σ_vv) ûûᵀ of a finite cylinder with unit ``axis`` (m², x_axis/y_axis frame)."""
+    axis_x = dot3(axis, x_axis)
+    axis_y = dot3(axis, y_axis)
+    sin_theta2 = axis_x * axis_x + axis_y * axis_y
+    sin_theta = ops.sqrt(ops.minimum(sin_theta2, 1.0))
+    cos_theta = ops.sqrt(ops.maximum(1.0 - sin_theta2, 0.0))
+    sigma_uu, sigma_vv = cylinder_silhouette_moments(radius_m, length_m, sin_theta, cos_theta)
+    end_on = sin_theta2 < _END_ON_AXIS_SQUARED
+    # ûûᵀ = a⊥a⊥ᵀ/|a⊥|²; end-on the anisotropic part is zero and the division is skipped.
+    anisotropic = ops.where(end_on, 0.0, sigma_uu - sigma_vv) / ops.where(end_on, 1.0, sin_theta2)
+    return (
+        sigma_vv + anisotropic * axis_x * axis_x,
+        anisotropic * axis_x * axis_y,
+        sigma_vv + anisotropic * axis_y * axis_y,
+    )
+
+
+@dataclass(frozen=True)
+class TransverseCovariance:
+    """Σ⊥ (m², 2×2) of a source seen along ``direction``, in the frame (x_axis, y_axis, direction)."""
+
+    sigma_m2: np.ndarray
+    x_axis: np.ndarray
+    y_axis: np.ndarray
+    direction: np.ndarray
+
+
+def positive_size(value: float | None, name: str) -> float:
+    """``value`` as a float if it is a positive finite size, else ValueError naming ``name``."""
+    if value is None:
+        raise ValueError(f"{name}: required for this source")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{name}: must be a finite number, got {value}")
+    if number <= 0.0:
+        raise ValueError(f"{name}: must be positive, got {value}")
+    return number
+
+
+def facing_plane_axes(axis: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """In-plane unit axes (u, v) of a flat emitter that contains ``axis`` and is turned about it to face the
+    receiver: v = normalised d × u, so the plane is face-on when u ⟂ d and foreshortened by |u⊥| along u.
+    """
+    v_axis = np.cross(direction, axis)
+    length = float(np.linalg.norm(v_axis))
+    if length < 1e-6:
+        raise ValueError("axis: parallel to the direction, so a flat source is seen exactly edge-on")
+    return axis, v_axis / length
+
+
+def transverse_covariance(
+    kind: str,
+    *,
+    direction: Sequence[float] = (0.0, 0.0, 1.0),
+    axis: Sequence[float] = (1.0, 0.0, 0.0),
+    radius_m: float | None = None,
+    length_m: float | None = None,
+    width_m: float | None = None,
+    height_m: float | None = None,
+    sigma_m: float | None = None,
+    reference: Sequence[float] | None = None,
+) -> TransverseCovariance:
+    """Σ⊥ of a source ``kind`` seen along ``direction`` (source → receiver), in its transverse frame.
+
+    ``axis``: the cylinder axis; for ``disk`` and ``rect`` an in-plane axis (a diameter; the width edge)
+    about which the emitter is turned to face the receiver (``facing_plane_axes``); ignored otherwise.
+    """
+    if kind not in SOURCE_KINDS:
+        raise ValueError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {kind!r}")
+    unit_direction = unit_vector(direction, "direction")
+    unit_axis = unit_vector(axis, "axis")
+    x_axis, y_axis = transverse_frame(unit_direction, reference)
+    frame = (tuple(x_axis), tuple(y_axis))
+    if kind == "sphere":
+        components = sphere_covariance_components(positive_size(radius_m, "radius"))
+    elif kind == "gaussian":
+        components = gaussian_covariance_components(positive_size(sigma_m, "sigma"))
+    elif kind == "cylinder":
+        components = cylinder_covariance_components(
+            positive_size(radius_m, "radius"), positive_size(length_m, "length"), tuple(unit_axis), *frame
+        )
+    elif kind == "disk":
+        radius = positive_size(radius_m, "radius")
+        u_axis, v_axis = facing_plane_axes(unit_axis, unit_direction)
+        normal = cross3(tuple(u_axis), tuple(v_axis))
+        components = disk_covariance_components(radius, normal, *frame)
+    else:
+        width, height = positive_size(width_m, "width"), positive_size(height_m, "height")
+        u_axis, v_axis = facing_plane_axes(unit_axis, unit_direction)
+        components = rectangle_covariance_components(width, height, tuple(u_axis), tuple(v_axis), *frame)
+    sxx, sxy, syy = (float(c) for c in components)
+    sigma = np.array([[sxx, sxy], [sxy, syy]])
+    return TransverseCovariance(sigma_m2=sigma, x_axis=x_axis, y_axis=y_axis, direction=unit_direction)
+
+
+def covariance_from_intensity_image(image: Any, pixel_size_m: float) -> np.ndarray:
+    """Σ⊥ (m²) of a tabulated emission profile: image[row, column], columns along x, rows along y.
+
+    Each pixel is taken as uniformly bright over its p × p square, so the exact second moments are those of
+    the pixel centres about the intensity centroid plus p²/12 on the diagonal (the pixels' own variance).
+    """
+    intensity = np.asarray(image, dtype=float)
+    if intensity.ndim != 2 or min(intensity.shape) < 1:
+        raise ValueError(f"image: expected a 2-D intensity array, got shape {intensity.shape}")
+    if not np.all(np.isfinite(intensity)) or np.any(intensity < 0.0) or intensity.sum() <= 0.0:
+        raise ValueError("image: intensities must be finite, non-negative and not all zero")
+    pixel = positive_size(pixel_size_m, "pixel_size_m")
+    rows, columns = np.indices(intensity.shape, dtype=float)
+    weights = intensity / intensity.sum()
+    x = columns * pixel
+    y = rows * pixel
+    x_mean, y_mean = float(np.sum(weights * x)), float(np.sum(weights * y))
+    dx, dy = x - x_mean, y - y_mean
+    pixel_variance = pixel * pixel / 12.0
+    sxx = float(np.sum(weights * dx * dx)) + pixel_variance
+    sxy = float(np.sum(weights * dx * dy))
+    syy = float(np.sum(weights * dy * dy)) + pixel_variance
+    return np.array([[sxx, sxy], [sxy, syy]])
+
+
+def log_hessian_at_origin(
+    angular_coherence: Callable[[float, float], float], step_per_m: float
+) -> np.ndarray:
+    """∂²_ζ ln f̃(ζ) at ζ = 0 (m²) by central differences with Richardson extrapolation (error O(h⁴)).
+
+    ``angular_coherence(ζ_x, ζ_y)``: f̃ at a transverse spatial frequency (1/m), need not be normalised.
+    ``step_per_m``: the difference step h (1/m); choose h ≈ 0.05/(source size) so that ln f̃ changes
+    by ~1e-3 over h while rounding (≈ 1e-16/h²·|ln f̃|) stays negligible.
+    """
+    step = positive_size(step_per_m, "step_per_m")
+
+    def log_f(zx: float, zy: float) -> float:
+        value = float(angular_coherence(zx, zy))
+        if not (value > 0.0 and math.isfinite(value)):
+            raise ValueError(f"angular_coherence: must be positive near 0, got {value} at ({zx}, {zy})")
+        return math.log(value)
+
+    def central(h: float) -> np.ndarray:
+        centre = log_f(0.0, 0.0)
+        dxx = (log_f(h, 0.0) - 2.0 * centre + log_f(-h, 0.0)) / (h * h)
+        dyy = (log_f(0.0, h) - 2.0 * centre + log_f(0.0, -h)) / (h * h)
+        dxy = (log_f(h, h) - log_f(h, -h) - log_f(-h, h) + log_f(-h, -h)) / (4.0 * h * h)
+        return np.array([[dxx, dxy], [dxy, dyy]])
+
+    coarse, fine = central(step), central(0.5 * step)
+    return fine + (fine - coarse) / 3.0
+
+
+def covariance_from_angular_coherence(
+    angular_coherence: Callable[[float, float], float], step_per_m: float
+) -> np.ndarray:
+    """Σ⊥ = −∂²_ζ ln f̃|₀ (m²), the inverse of Theorem 5.1(ii)'s shape matrix with Lemma 4.4's sign."""
+    return -log_hessian_at_origin(angular_coherence, step_per_m)
+
+
+def whitened_angular_coherence(kind: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """The normalised f̃/f̃(0) of a coefficient kind as a function of whitened coordinates (u₁, u₂)."""
+    if kind == "disk":
+
+        def disk(u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+            v = 2.0 * np.hypot(u1, u2)
+            safe_v = np.where(v < 1e-8, 1.0, v)
+            return np.where(v < 1e-8, 1.0 - v * v / 8.0, 2.0 * j1(safe_v) / safe_v)
+
+        return disk
+    if kind == "rect":
+        # np.sinc(t) = sin(πt)/(πt); sin(√3u)/(√3u) = np.sinc(√3u/π).
+        return lambda u1, u2: np.sinc(math.sqrt(3.0) * u1 / math.pi) * np.sinc(math.sqrt(3.0) * u2 / math.pi)
+    if kind == "gaussian":
+        return lambda u1, u2: np.exp(-0.5 * (u1 * u1 + u2 * u2))
+    raise ValueError(f"kind: must be one of disk, rect, gaussian, got {kind!r}")
+
+
+@lru_cache(maxsize=64)
+def _normalised_coefficients(coefficient_kind: str, mode_count: int) -> tuple[tuple[int, int, float], ...]:
+    projected = project_csd(whitened_angular_coherence(coefficient_kind), np.eye(2), mode_count)
+    h_at_zero = hermite_functions(0.0, max(max(n, m) for n, m in projected), NUMPY)
+    at_origin = sum(value * h_at_zero[n] * h_at_zero[m] for (n, m), value in projected.items())
+    return tuple((n, m, value / at_origin) for (n, m), value in projected.items())
+
+
+def source_coefficients(kind: str, mode_count: int) -> dict[tuple[int, int], float]:
+    """Universal whitened-basis coefficients ĉ_nm of a source kind's angular coherence (Eq. 14), μ(0) = 1.
+
+    ``kind``: a source kind (``SOURCE_KINDS``) or a coefficient kind (disk, rect, gaussian). Computed once
+    per (kind, mode_count) by Gauss–Hermite quadrature and cached. Use with ``coherence.degree_of_coherence``.
+    """
+    if isinstance(mode_count, bool) or not isinstance(mode_count, int) or not 1 <= mode_count <= MAX_MODES:
+        raise ValueError(f"modes: must be an integer in 1..{MAX_MODES}, got {mode_count!r}")
+    coefficient_kind = COEFFICIENT_KIND.get(kind, kind)
+    if coefficient_kind not in ("disk", "rect", "gaussian"):
+        raise ValueError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {kind!r}")
+    return {(n, m): value for n, m, value in _normalised_coefficients(coefficient_kind, mode_count)}
