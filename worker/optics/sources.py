@@ -30,7 +30,8 @@ coherence of each kind is a universal function, so its coefficients ĉ_nm are co
 A cylinder uses the rectangle kind: side-on (Fig. 7's case) its silhouette is the uniform strip 2R × L; for
 oblique views only the 0th mode, which depends on Σ alone, is exact. The rectangle's whitened square is
 assumed aligned with Σ's principal axes (a rectangle seen face-on, or its edges' projections orthogonal).
-Coefficients are normalised so that Σ ĉ h_n(0) h_m(0) = 1, i.e. μ(0) = 1.
+Coefficients are the L²-closest expansion subject to μ(0) = Σ ĉ h_n(0) h_m(0) = 1 (a Lagrange-multiplier
+correction of the projection; see ``_normalised_coefficients``).
 
 Numeric path for tabulated emission: ``covariance_from_intensity_image`` (moments of a pixel image) and
 ``covariance_from_angular_coherence`` (finite differences of ln f̃ at 0, Theorem 5.1(ii)).
@@ -311,10 +312,20 @@ def whitened_angular_coherence(kind: str) -> Callable[[np.ndarray, np.ndarray], 
 
 @lru_cache(maxsize=64)
 def _normalised_coefficients(coefficient_kind: str, mode_count: int) -> tuple[tuple[int, int, float], ...]:
+    """L²-closest expansion of the whitened f̃ subject to μ(0) = Σ ĉ_nm h_n(0) h_m(0) = 1.
+
+    With the orthonormal projection p = ⟨f̃ | h_n h_m⟩ and a_nm = h_n(0) h_m(0), the constrained minimiser
+    of ‖f̃ − Σ ĉ h_n h_m‖² is ĉ = p + λa with λ = (1 − a·p)/(a·a) (one Lagrange multiplier). Because the
+    mode sets are nested, its L² error cannot grow as modes are added, unlike a plain rescaling of p.
+    """
     projected = project_csd(whitened_angular_coherence(coefficient_kind), np.eye(2), mode_count)
-    h_at_zero = hermite_functions(0.0, max(max(n, m) for n, m in projected), NUMPY)
-    at_origin = sum(value * h_at_zero[n] * h_at_zero[m] for (n, m), value in projected.items())
-    return tuple((n, m, value / at_origin) for (n, m), value in projected.items())
+    degrees = list(projected)
+    h_at_zero = hermite_functions(0.0, max(max(n, m) for n, m in degrees), NUMPY)
+    at_origin = np.array([h_at_zero[n] * h_at_zero[m] for n, m in degrees])
+    values = np.array([projected[degree] for degree in degrees])
+    multiplier = (1.0 - float(at_origin @ values)) / float(at_origin @ at_origin)
+    normalised = values + multiplier * at_origin
+    return tuple((n, m, float(value)) for (n, m), value in zip(degrees, normalised, strict=True))
 
 
 def source_coefficients(kind: str, mode_count: int) -> dict[tuple[int, int], float]:
