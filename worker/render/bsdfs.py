@@ -1,0 +1,446 @@
+"""Kernel-side evaluation and sampling of hgrender materials, for the ``hg_path`` integrator.
+
+All functions run inside the integrator's symbolic loop on Dr.Jit arrays. Directions are in the local
+shading frame (z = normal, flipped towards the incident side for two-sided materials); ``wi`` points to the
+previous vertex (towards the camera), ``wo`` to the next one (towards the light); by reciprocity the
+formulas of ``worker.optics`` are evaluated with the light arriving along ``wo``. ``eval_pdf`` returns
+f·cos θo and the hero-wavelength MIS density in solid angle — the mean over the four wavelengths of the
+per-wavelength sampling density, so that wavelength-dependent lobes (gratings, PSD lobes) combine without
+bias (Wilkie et al. 2014, "Hero wavelength spectral sampling").
+
+The physics lives in ``worker.optics`` (rough surfaces: Eq. 15; thin films: Eq. 18; gratings: Eq. 20);
+this module gathers parameters and dispatches. Diffuse, mirror and smooth dielectric materials read their
+spectra from the material table (one kernel branch per kind); rough, thin-film and grating materials get
+one branch per material with their constants compiled in (their optics models are Python objects).
+Coherence enters only through ``IncidentCoherence`` and only for thin films and gratings (Thm 5.1(i)).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import drjit as dr
+
+from worker.optics import grating as grating_model
+from worker.optics import rough_surface
+from worker.optics.array_ops import drjit_ops
+from worker.optics.complex_pair import ComplexPair
+from worker.optics.fresnel import fresnel_dielectric, fresnel_reflectance
+from worker.render import materials as mat
+from worker.render.film_terms import film_amplitudes, reflectance_terms
+from worker.render.spectral import lookup
+
+OPS = drjit_ops()
+
+
+@dataclass
+class IncidentCoherence:
+    """Coherence of the light arriving at a vertex: Σ⊥ (m², in frame_x/frame_y ⟂ propagation), r (m)."""
+
+    sigma_xx: Any
+    sigma_xy: Any
+    sigma_yy: Any
+    distance_m: Any
+    frame_x: Any  # world-space unit vectors spanning the transverse plane
+    frame_y: Any
+
+
+def _vec(v: Any) -> tuple[Any, Any, Any]:
+    return (v.x, v.y, v.z)
+
+
+class MaterialKernels:
+    """Gathers material parameters and dispatches to the formulas of the kinds present in the scene."""
+
+    def __init__(
+        self,
+        mi: Any,
+        table: Any,
+        spectra: Any,
+        materials: mat.MaterialTable,
+        visibility: Callable[[IncidentCoherence, Any, Any], Any],
+    ) -> None:
+        self.mi = mi
+        self.table = table
+        self.spectra = spectra
+        self.materials = materials
+        self.kinds = materials.kinds
+        self.max_beams = max(materials.max_beams(), 2)
+        self.visibility = visibility  # (coherence, separation_world_m, wavelengths) -> Spectrum μ
+
+    # ---------------------------------------------------------------- parameters
+    def param(self, material: Any, offset: int) -> Any:
+        return dr.gather(self.mi.Float, self.table, material * mat.STRIDE + offset)
+
+    def spectrum(self, material: Any, offset: int, wavelengths: Any) -> Any:
+        spectrum_id = self.mi.UInt32(self.param(material, offset))
+        return lookup(self.mi, self.spectra, spectrum_id, wavelengths)
+
+    def kind(self, material: Any) -> Any:
+        return self.mi.UInt32(self.param(material, mat.KIND))
+
+    def is_specular(self, material: Any) -> Any:
+        kind = self.kind(material)
+        return (kind == int(mat.MaterialKind.MIRROR)) | (kind == int(mat.MaterialKind.DIELECTRIC))
+
+    def interface_reflectance(self, material: Any, cos_theta: Any, wavelengths: Any) -> Any:
+        """Unpolarised Fresnel reflectance F(θ) of the material's (conductor or substrate) interface."""
+        exterior = self.param(material, mat.EXTERIOR_IOR)
+        eta = self.spectrum(material, mat.ETA_ID, wavelengths) / exterior
+        kappa = self.spectrum(material, mat.KAPPA_ID, wavelengths) / exterior
+        result = self.mi.Spectrum(0.0)
+        for j in range(len(wavelengths)):
+            result[j] = fresnel_reflectance(cos_theta, ComplexPair(eta[j], kappa[j]), OPS)
+        return result
+
+    def albedo(self, material: Any, wavelengths: Any) -> Any:
+        """Directional-hemispherical reflectance at normal incidence, for the albedo AOV."""
+        kind = self.kind(material)
+        diffuse = kind == int(mat.MaterialKind.DIFFUSE)
+        reflective = (kind != int(mat.MaterialKind.DIFFUSE)) & (kind != int(mat.MaterialKind.BLACK))
+        value = dr.select(diffuse, self.spectrum(material, mat.REFLECTANCE_ID, wavelengths), 0.0)
+        return dr.select(reflective, self.interface_reflectance(material, 1.0, wavelengths), value)
+
+    def _per_material(self, kind: mat.MaterialKind) -> list[tuple[int, Any]]:
+        return [(index, self.materials.records[index].model) for index in self.materials.indices_of(kind)]
+
+    # ---------------------------------------------------------------- evaluation
+    def eval_pdf(
+        self,
+        material: Any,
+        wi: Any,
+        wo: Any,
+        wavelengths: Any,
+        coherence: IncidentCoherence,
+        normal_world: Any,
+        frame: Any,
+        active: Any,
+    ) -> tuple[Any, Any]:
+        """(f·cos θo per wavelength, hero-MIS pdf) for light arriving along ``wo``."""
+        mi = self.mi
+        kind = self.kind(material)
+        value = mi.Spectrum(0.0)
+        pdf = mi.Float(0.0)
+        valid = active & (wi.z > 0) & (wo.z > 0)
+        if mat.MaterialKind.DIFFUSE in self.kinds:
+            is_kind = valid & (kind == int(mat.MaterialKind.DIFFUSE))
+            reflectance = self.spectrum(material, mat.REFLECTANCE_ID, wavelengths)
+            value = dr.select(is_kind, reflectance * (wo.z / math.pi), value)
+            pdf = dr.select(is_kind, wo.z / math.pi, pdf)
+        for index, surface in self._per_material(mat.MaterialKind.ROUGH_CONDUCTOR):
+            is_this = valid & (material == index)
+            fresnel = self.interface_reflectance(material, wo.z, wavelengths)
+            lobe_value, lobe_pdf = self._rough_eval(surface, wi, wo, wavelengths, fresnel)
+            value = dr.select(is_this, lobe_value, value)
+            pdf = dr.select(is_this, lobe_pdf, pdf)
+        for index, surface in self._per_material(mat.MaterialKind.THIN_FILM):
+            is_this = valid & (material == index)
+            terms = self.film_terms(material, wo.z, wavelengths)
+            thickness_m = self.param(material, mat.FILM_THICKNESS_M)
+            film = combine_film_terms(
+                terms,
+                lambda d, t=thickness_m: self.visibility(coherence, normal_world * (t * d), wavelengths),
+            )
+            lobe_value, lobe_pdf = self._rough_eval(surface, wi, wo, wavelengths, film)
+            value = dr.select(is_this, lobe_value, value)
+            pdf = dr.select(is_this, lobe_pdf, pdf)
+        for index, grating in self._per_material(mat.MaterialKind.GRATING):
+            is_this = valid & (material == index)
+            g_value, g_pdf = self._grating_eval(material, grating, wi, wo, wavelengths, coherence, frame)
+            value = dr.select(is_this, g_value, value)
+            pdf = dr.select(is_this, g_pdf, pdf)
+        return value, pdf
+
+    # ---------------------------------------------------------------- sampling
+    def sample(self, material: Any, wi: Any, wavelengths: Any, sample1: Any, sample2: Any, active: Any):
+        """(wo, weight = f·cos/pdf per wavelength, pdf, delta, film_terms) for the next path segment.
+
+        ``film_terms`` are the thin film's partially-coherent reflectance terms at the sampled direction
+        (``combine_film_terms``); the weight uses their incoherent part, the integrator rescales it once the
+        incident coherence is known.
+        """
+        mi = self.mi
+        kind = self.kind(material)
+        wo = mi.Vector3f(0.0, 0.0, 1.0)
+        weight = mi.Spectrum(0.0)
+        pdf = mi.Float(0.0)
+        delta = mi.Bool(False)
+        film_terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
+        front = active & (wi.z > 0)
+        if mat.MaterialKind.DIFFUSE in self.kinds:
+            is_kind = front & (kind == int(mat.MaterialKind.DIFFUSE))
+            direction = mi.warp.square_to_cosine_hemisphere(sample2)
+            wo = dr.select(is_kind, direction, wo)
+            weight = dr.select(is_kind, self.spectrum(material, mat.REFLECTANCE_ID, wavelengths), weight)
+            pdf = dr.select(is_kind, mi.warp.square_to_cosine_hemisphere_pdf(direction), pdf)
+        if mat.MaterialKind.MIRROR in self.kinds:
+            is_kind = front & (kind == int(mat.MaterialKind.MIRROR))
+            wo = dr.select(is_kind, mi.reflect(wi), wo)
+            weight = dr.select(is_kind, self.interface_reflectance(material, wi.z, wavelengths), weight)
+            pdf = dr.select(is_kind, 1.0, pdf)
+            delta |= is_kind
+        if mat.MaterialKind.DIELECTRIC in self.kinds:
+            is_kind = active & (kind == int(mat.MaterialKind.DIELECTRIC))
+            d_wo, d_weight = self._dielectric_sample(material, wi, wavelengths, sample1)
+            wo = dr.select(is_kind, d_wo, wo)
+            weight = dr.select(is_kind, d_weight, weight)
+            pdf = dr.select(is_kind, 1.0, pdf)
+            delta |= is_kind
+        for index, surface in self._per_material(mat.MaterialKind.ROUGH_CONDUCTOR):
+            is_this = front & (material == index)
+            r_wo, r_weight, r_pdf, r_delta = self._rough_sample(
+                material, surface, wi, wavelengths, sample1, sample2, None
+            )
+            wo = dr.select(is_this, r_wo, wo)
+            weight = dr.select(is_this, r_weight, weight)
+            pdf = dr.select(is_this, r_pdf, pdf)
+            delta |= is_this & r_delta
+        for index, surface in self._per_material(mat.MaterialKind.THIN_FILM):
+            is_this = front & (material == index)
+            r_wo, r_weight, r_pdf, r_delta = self._rough_sample(
+                material, surface, wi, wavelengths, sample1, sample2, film_terms_out := []
+            )
+            wo = dr.select(is_this, r_wo, wo)
+            weight = dr.select(is_this, r_weight, weight)
+            pdf = dr.select(is_this, r_pdf, pdf)
+            delta |= is_this & r_delta
+            for slot, term in enumerate(film_terms_out[0]):
+                film_terms[slot] = dr.select(is_this, term, film_terms[slot])
+        for index, grating in self._per_material(mat.MaterialKind.GRATING):
+            is_this = front & (material == index)
+            g_wo, g_weight, g_pdf, g_delta = self._grating_sample(
+                material, grating, wi, wavelengths, sample1, sample2
+            )
+            wo = dr.select(is_this, g_wo, wo)
+            weight = dr.select(is_this, g_weight, weight)
+            pdf = dr.select(is_this, g_pdf, pdf)
+            delta |= is_this & g_delta
+        return wo, dr.select(active, weight, 0.0), pdf, delta, film_terms
+
+    # ---------------------------------------------------------------- smooth dielectric
+    def _dielectric_sample(self, material: Any, wi: Any, wavelengths: Any, sample1: Any):
+        """Smooth dielectric (Dirac): reflect or refract with probability F of the hero wavelength.
+
+        A dispersive index bends each wavelength differently, so after a refraction only the hero
+        wavelength's path stays valid: its weight gains the factor 4 (its share of the four-wavelength pdf)
+        and the others are zeroed — hero-wavelength spectral sampling. Radiance scales by 1/η² on refraction.
+        """
+        mi = self.mi
+        eta = self.spectrum(material, mat.ETA_ID, wavelengths)[0] / self.param(material, mat.EXTERIOR_IOR)
+        reflectance, cos_t = fresnel_dielectric(wi.z, eta, OPS)
+        reflect = sample1 <= reflectance
+        eta_ti = dr.select(wi.z >= 0, eta, dr.rcp(eta))
+        refracted = mi.Vector3f(-wi.x / eta_ti, -wi.y / eta_ti, cos_t)
+        wo = dr.select(reflect, mi.reflect(wi), refracted)
+        collapse = ~reflect & (self.param(material, mat.DISPERSIVE) > 0.5)
+        weight = mi.Spectrum(1.0)
+        weight[0] = dr.select(collapse, float(len(wavelengths)), 1.0)
+        for j in range(1, len(wavelengths)):
+            weight[j] = dr.select(collapse, 0.0, 1.0)
+        weight = dr.select(reflect, weight, weight * dr.square(dr.rcp(eta_ti)))
+        return wo, weight
+
+    # ---------------------------------------------------------------- rough statistical surface (Eq. 15)
+    def _rough_eval(
+        self, surface: rough_surface.RoughSurface, wi: Any, wo: Any, wavelengths: Any, reflectance: Any
+    ) -> tuple[Any, Any]:
+        """Scattered lobe value f·cos θo and hero-MIS pdf; light arrives along ``wo`` (reciprocity)."""
+        mi = self.mi
+        value = mi.Spectrum(0.0)
+        pdf_sum = mi.Float(0.0)
+        light, view = _vec(wo), _vec(wi)
+        for j in range(len(wavelengths)):
+            wavelength_m = wavelengths[j] * 1e-9
+            brdf = rough_surface.rough_reflection_eval(
+                surface, light, view, wavelength_m, reflectance[j], OPS
+            )
+            value[j] = brdf * wo.z
+            pdf_sum += rough_surface.rough_reflection_pdf(surface, view, light, wavelength_m, OPS)
+        return value, pdf_sum / len(wavelengths)
+
+    def film_terms(self, material: Any, cos_i: Any, wavelengths: Any) -> list[Any]:
+        """[R_incoherent, X_1 … X_{P−1}] per wavelength (``combine_film_terms``) at incidence cos_i."""
+        mi = self.mi
+        exterior = self.param(material, mat.EXTERIOR_IOR)
+        thickness_m = self.param(material, mat.FILM_THICKNESS_M)
+        film_ior = self.spectrum(material, mat.FILM_IOR_ID, wavelengths)
+        substrate_n = self.spectrum(material, mat.ETA_ID, wavelengths)
+        substrate_k = self.spectrum(material, mat.KAPPA_ID, wavelengths)
+        terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
+        for j in range(len(wavelengths)):
+            amplitudes = film_amplitudes(
+                cos_i,
+                wavelengths[j] * 1e-9,
+                thickness_m,
+                film_ior[j],
+                ComplexPair(substrate_n[j], substrate_k[j]),
+                exterior,
+                self.max_beams,
+                OPS,
+            )
+            for slot, term in enumerate(reflectance_terms(amplitudes)):
+                terms[slot][j] = term
+        return terms
+
+    def _rough_sample(
+        self,
+        material: Any,
+        surface: rough_surface.RoughSurface,
+        wi: Any,
+        wavelengths: Any,
+        sample1: Any,
+        sample2: Any,
+        film_terms_out: list | None,
+    ):
+        """Specular (delta) part with probability e^{−g(λ_hero)}, else an exact PSD-lobe sample at λ_hero.
+
+        For a thin film (``film_terms_out`` given) the interface reflectance is the film's incoherent
+        reflectance at the sampled direction; its terms are appended to ``film_terms_out``.
+        """
+        mi = self.mi
+        view = _vec(wi)
+        hero_m = wavelengths[0] * 1e-9
+        g_hero = rough_surface.roughness_exponent(surface.rms_height_m, wi.z, hero_m)
+        specular_probability = dr.exp(-g_hero)
+        choose_specular = sample1 < specular_probability
+        lobe_sample1 = dr.clip(
+            (sample1 - specular_probability) / dr.maximum(1.0 - specular_probability, 1e-12), 0.0, 0.999999
+        )
+        lobe_dir, _, lobe_valid = rough_surface.rough_reflection_sample(
+            surface, view, hero_m, lobe_sample1, sample2[0], OPS
+        )
+        lobe_wo = mi.Vector3f(*lobe_dir)
+        wo = dr.select(choose_specular, mi.reflect(wi), lobe_wo)
+        if film_terms_out is None:
+            reflectance = self.interface_reflectance(material, wo.z, wavelengths)
+        else:
+            terms = self.film_terms(material, wo.z, wavelengths)
+            film_terms_out.append(terms)
+            reflectance = terms[0]
+        lobe_value, lobe_pdf = self._rough_eval(surface, wi, lobe_wo, wavelengths, reflectance)
+        lobe_weight = lobe_value / dr.maximum(lobe_pdf * (1.0 - specular_probability), 1e-20)
+        specular_weight = mi.Spectrum(0.0)
+        for j in range(len(wavelengths)):
+            g_j = rough_surface.roughness_exponent(surface.rms_height_m, wi.z, wavelengths[j] * 1e-9)
+            specular_weight[j] = reflectance[j] * dr.exp(-g_j) / dr.maximum(specular_probability, 1e-20)
+        weight = dr.select(
+            choose_specular, specular_weight, dr.select(lobe_valid & (lobe_pdf > 0), lobe_weight, 0.0)
+        )
+        pdf = dr.select(choose_specular, 1.0, lobe_pdf)
+        return wo, weight, pdf, choose_specular
+
+    # ---------------------------------------------------------------- grating (Eq. 20)
+    def _grating_axes(self, material: Any, frame: Any) -> tuple[Any, Any]:
+        angle = self.param(material, mat.ORIENTATION_RAD)
+        cos_a, sin_a = dr.cos(angle), dr.sin(angle)
+        return frame.s * cos_a + frame.t * sin_a, frame.t * cos_a - frame.s * sin_a
+
+    def _to_grating(self, material: Any, v: Any) -> Any:
+        angle = self.param(material, mat.ORIENTATION_RAD)
+        cos_a, sin_a = dr.cos(angle), dr.sin(angle)
+        return self.mi.Vector3f(cos_a * v.x + sin_a * v.y, -sin_a * v.x + cos_a * v.y, v.z)
+
+    def _from_grating(self, material: Any, v: Any) -> Any:
+        angle = self.param(material, mat.ORIENTATION_RAD)
+        cos_a, sin_a = dr.cos(angle), dr.sin(angle)
+        return self.mi.Vector3f(cos_a * v.x - sin_a * v.y, sin_a * v.x + cos_a * v.y, v.z)
+
+    def _angular_covariance(
+        self, material: Any, coherence: IncidentCoherence, frame: Any
+    ) -> tuple[Any, Any, Any]:
+        """Σ'/s²: the incident Σ⊥ projected on the grating plane (grating axes) over the squared distance."""
+        axis_u, axis_v = self._grating_axes(material, frame)
+        a, b = dr.dot(axis_u, coherence.frame_x), dr.dot(axis_u, coherence.frame_y)
+        c, d = dr.dot(axis_v, coherence.frame_x), dr.dot(axis_v, coherence.frame_y)
+        sxx, sxy, syy = coherence.sigma_xx, coherence.sigma_xy, coherence.sigma_yy
+        inv_r2 = dr.rcp(dr.square(dr.maximum(coherence.distance_m, 1e-9)))
+        return (
+            (a * a * sxx + 2 * a * b * sxy + b * b * syy) * inv_r2,
+            (a * c * sxx + (a * d + b * c) * sxy + b * d * syy) * inv_r2,
+            (c * c * sxx + 2 * c * d * sxy + d * d * syy) * inv_r2,
+        )
+
+    def _grating_eval(
+        self,
+        material: Any,
+        grating: grating_model.BinaryGrating,
+        wi: Any,
+        wo: Any,
+        wavelengths: Any,
+        coherence: IncidentCoherence,
+        frame: Any,
+    ) -> tuple[Any, Any]:
+        mi = self.mi
+        light, view = _vec(self._to_grating(material, wo)), _vec(self._to_grating(material, wi))
+        angular_cov = self._angular_covariance(material, coherence, frame)
+        fresnel = self.interface_reflectance(material, wo.z, wavelengths)
+        value = mi.Spectrum(0.0)
+        pdf_sum = mi.Float(0.0)
+        for j in range(len(wavelengths)):
+            wavelength_m = wavelengths[j] * 1e-9
+            brdf = grating_model.grating_eval(
+                grating, light, view, wavelength_m, fresnel[j], angular_cov, OPS
+            )
+            value[j] = brdf * wo.z
+            pdf_sum += grating_model.grating_pdf(grating, view, light, wavelength_m, angular_cov, OPS)
+        return value, pdf_sum / len(wavelengths)
+
+    def _grating_sample(
+        self,
+        material: Any,
+        grating: grating_model.BinaryGrating,
+        wi: Any,
+        wavelengths: Any,
+        sample1: Any,
+        sample2: Any,
+    ):
+        """The 0th order (specular, coherence kept) with probability η_00(λ_hero), else a diffraction lobe.
+
+        Lobes are drawn with the intrinsic lobe width only: the coherence of indirect light is not known
+        when the direction is chosen, and direct light reaches gratings through next-event estimation only
+        (docs/integrator.md).
+        """
+        mi = self.mi
+        view = _vec(self._to_grating(material, wi))
+        hero_m = wavelengths[0] * 1e-9
+        zero_cov = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
+        specular_probability = grating_model.specular_efficiency(grating, hero_m, OPS)
+        choose_specular = sample1 < specular_probability
+        order_sample = dr.clip(
+            (sample1 - specular_probability) / dr.maximum(1.0 - specular_probability, 1e-12), 0.0, 0.999999
+        )
+        lobe_dir, _, lobe_valid, _ = grating_model.grating_sample(
+            grating, view, hero_m, zero_cov, order_sample, sample2[0], sample2[1], OPS
+        )
+        lobe_wo = self._from_grating(material, mi.Vector3f(*lobe_dir))
+        wo = dr.select(choose_specular, mi.reflect(wi), lobe_wo)
+        fresnel = self.interface_reflectance(material, wo.z, wavelengths)
+        lobe_value = mi.Spectrum(0.0)
+        pdf_sum = mi.Float(0.0)
+        specular_weight = mi.Spectrum(0.0)
+        light = _vec(self._to_grating(material, lobe_wo))
+        for j in range(len(wavelengths)):
+            wavelength_m = wavelengths[j] * 1e-9
+            brdf = grating_model.grating_eval(grating, light, view, wavelength_m, fresnel[j], zero_cov, OPS)
+            lobe_value[j] = brdf * lobe_wo.z
+            pdf_sum += grating_model.grating_pdf(grating, view, light, wavelength_m, zero_cov, OPS)
+            eta_00 = grating_model.specular_efficiency(grating, wavelength_m, OPS)
+            specular_weight[j] = fresnel[j] * eta_00 / dr.maximum(specular_probability, 1e-20)
+        lobe_pdf = pdf_sum / len(wavelengths)
+        lobe_weight = lobe_value / dr.maximum(lobe_pdf * (1.0 - specular_probability), 1e-20)
+        weight = dr.select(
+            choose_specular, specular_weight, dr.select(lobe_valid & (lobe_pdf > 0), lobe_weight, 0.0)
+        )
+        pdf = dr.select(choose_specular, 1.0, lobe_pdf)
+        return wo, weight, pdf, choose_specular
+
+
+def combine_film_terms(terms: list[Any], visibility_at: Callable[[int], Any]) -> Any:
+    """R(V) = R_incoherent + 2 Σ_d V_d X_d — the partially coherent multi-beam sum (Eq. 18 for P = 2)."""
+    reflectance = terms[0]
+    for separation in range(1, len(terms)):
+        reflectance = reflectance + 2.0 * visibility_at(separation) * terms[separation]
+    return dr.maximum(reflectance, 0.0)

@@ -1,0 +1,413 @@
+"""``hg_path``: a spectral path tracer that carries the coherence of light in Hermite-Gauss space.
+
+Estimator. Unidirectional path tracing from the camera with next-event estimation and MIS (balance
+heuristic, hero-wavelength pdfs, see ``bsdfs``), Russian roulette from ``rr_depth``, and Mitsuba's
+``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination). Emitter surfaces absorb.
+
+Coherence state (paper §5.2: "each traced ray carries the shape matrix, transverse HG coefficients, the
+propagation direction and distance r"). Because paths start at the camera, the coherence of the light a
+vertex *receives* is known only once the path reaches that light's source. So each non-specular vertex
+leaves a *pending* record, resolved at the next non-specular vertex or emitter hit:
+
+* ``chain_distance_m`` r: the distance accumulated along perfect mirror/glass chains since the pending
+  vertex (Θ is kept and r grows through Dirac interactions — §5 "Perfectly specular reflectors");
+* ``frame_x``/``frame_y``: the transverse frame of the pending vertex's incident beam, reflected through
+  the chain so that the source's Σ⊥ lands in that vertex's frame;
+* ``film_separation``: for a thin-film vertex, the separation τ·n̂ (m) between the film's two interfaces,
+  also carried through the chain, and its partially-coherent reflectance terms (linear in the visibilities).
+
+At resolution the source is the emitter (whole emitter, BRIEF) or the next vertex's scattering region
+(Theorem 5.1(ii): the scattered shape depends only on the ensemble-averaged reflectivity over that region;
+a uniform disk of radius ``scattering_region_radius_m``, see docs/physics.md).
+
+Diagnostics (BRIEF): M = (k/r)²Σ⊥ at λ = 550 nm of the light incident at the first non-specular vertex,
+luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, all later
+contributions the resolved Σ⊥ of the first vertex's indirect light.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import drjit as dr
+
+from worker.mitsuba_setup import load_mitsuba
+from worker.optics.array_ops import drjit_ops
+from worker.optics.coherence import degree_of_coherence, diagnostics_components
+from worker.optics.frames import transverse_frame_components
+from worker.render import materials as mat
+from worker.render.bsdfs import IncidentCoherence, MaterialKernels, combine_film_terms
+from worker.render.emitters import emitter_coherence
+from worker.render.spectral import LAMBDA_REFERENCE_NM, BandLayout
+
+# Python integrators subclass variant-specific classes: the variant must be chosen before this import
+# (``load_mitsuba`` honours HGRENDER_VARIANT; ``auto`` picks cuda_ad_spectral when a GPU is usable).
+mi = load_mitsuba()
+OPS = drjit_ops()
+K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)
+
+
+@dataclass
+class RenderContext:
+    """Everything ``hg_path`` needs besides the Mitsuba scene (built by ``scene_compiler``)."""
+
+    bands: BandLayout
+    material_table: mat.MaterialTable
+    material_flat: Any  # mi.Float
+    spectra_flat: Any  # mi.Float
+    shape_material: Any  # mi.UInt32: shape registry id -> material index
+    emitter_flat: Any  # mi.Float
+    emitter_index: Any  # mi.UInt32: emitter registry id -> emitter record
+    emitter_kinds: set
+    coefficients: dict  # (n, m) -> ĉ of the universal source expansion used for visibilities
+    camera_right: Any  # world-space unit vectors of the image's +x and +y (up) directions
+    camera_up: Any
+
+
+@dataclass
+class PathResult:
+    radiance: Any  # mi.Spectrum at the sample's wavelengths
+    diag_weight: Any
+    diag_mxx: Any
+    diag_mxy: Any
+    diag_myy: Any
+    diag_r: Any
+    diag_cos2: Any
+    diag_sin2: Any
+    depth_m: Any
+    normal: Any
+    albedo: Any
+
+
+def _luminance(wavelengths: Any, value: Any, span_nm: float) -> Any:
+    """Y of a four-wavelength spectral estimate: (Λ/4) Σ_j ȳ(λ_j)·value_j (CIE 1931 ȳ)."""
+    total = mi.Float(0.0)
+    for j in range(len(wavelengths)):
+        total += mi.cie1931_y(wavelengths[j]) * value[j]
+    return total * (span_nm / len(wavelengths))
+
+
+def _reflect_vector(vector: Any, normal: Any) -> Any:
+    """Mirror image of a (free) vector in the plane with unit ``normal``."""
+    return vector - 2.0 * dr.dot(vector, normal) * normal
+
+
+class HGPathIntegrator(mi.SamplingIntegrator):
+    """Mitsuba plugin ``hg_path`` (properties: ``max_depth`` = 8, ``rr_depth`` = 5)."""
+
+    def __init__(self, props: mi.Properties) -> None:
+        super().__init__(props)
+        self.max_depth = int(props.get("max_depth", 8))
+        self.rr_depth = int(props.get("rr_depth", 5))
+        self.context: RenderContext | None = None
+        self.kernels: MaterialKernels | None = None
+
+    def attach(self, context: RenderContext) -> None:
+        self.context = context
+        self.kernels = MaterialKernels(
+            mi,
+            context.material_flat,
+            context.spectra_flat,
+            context.material_table,
+            visibility=self.visibility,
+        )
+
+    # ------------------------------------------------------------------ coherence helpers
+    def visibility(self, coherence: IncidentCoherence, separation_world: Any, wavelengths: Any) -> Any:
+        """μ at the transverse part of ``separation_world`` (m) for each wavelength (Def. 4.1 / Eq. 18)."""
+        xi = (dr.dot(separation_world, coherence.frame_x), dr.dot(separation_world, coherence.frame_y))
+        sigma = (coherence.sigma_xx, coherence.sigma_xy, coherence.sigma_yy)
+        result = mi.Spectrum(0.0)
+        distance = dr.maximum(coherence.distance_m, 1e-9)
+        for j in range(len(wavelengths)):
+            result[j] = degree_of_coherence(
+                xi, sigma, distance, wavelengths[j] * 1e-9, self.context.coefficients, OPS
+            )
+        return result
+
+    def _frame_for(self, direction: Any) -> tuple[Any, Any]:
+        x_axis, y_axis = transverse_frame_components(
+            (direction.x, direction.y, direction.z), tuple(self.context.camera_right), OPS
+        )
+        return mi.Vector3f(*x_axis), mi.Vector3f(*y_axis)
+
+    def _scattering_region(self, material: Any, normal: Any, direction: Any, frame_x: Any, frame_y: Any):
+        """Σ⊥ of a non-specular vertex's scattering region (uniform disk in the tangent plane)."""
+        from worker.optics import sources
+
+        radius = self.kernels.param(material, mat.SCATTERING_REGION_RADIUS_M)
+        del direction  # the disk's projection depends on the frame ⟂ the direction only
+        return sources.disk_covariance_components(
+            radius,
+            (normal.x, normal.y, normal.z),
+            (frame_x.x, frame_x.y, frame_x.z),
+            (frame_y.x, frame_y.y, frame_y.z),
+        )
+
+    def _emitter_lookup(self, emitter_ptr: Any) -> Any:
+        registry_id = dr.reinterpret_array(mi.UInt32, emitter_ptr)
+        return dr.gather(mi.UInt32, self.context.emitter_index, registry_id)
+
+    def _screen_angle_terms(
+        self, sxx: Any, sxy: Any, syy: Any, frame_x: Any, frame_y: Any
+    ) -> tuple[Any, Any]:
+        """(cos 2ψ, sin 2ψ) of the screen-space angle ψ of the ℓ₁ axis (smallest eigenvalue of Σ⊥)."""
+        comps = diagnostics_components(sxx, sxy, syy, 1.0, LAMBDA_REFERENCE_NM * 1e-9, OPS)
+        axis = frame_x * dr.cos(comps.angle) + frame_y * dr.sin(comps.angle)
+        psi = dr.atan2(dr.dot(axis, self.context.camera_up), dr.dot(axis, self.context.camera_right))
+        return dr.cos(2.0 * psi), dr.sin(2.0 * psi)
+
+    # ------------------------------------------------------------------ Mitsuba interface
+    def sample(
+        self,
+        scene: mi.Scene,
+        sampler: mi.Sampler,
+        ray: mi.RayDifferential3f,
+        medium: mi.Medium = None,
+        active: bool = True,
+    ) -> tuple[mi.Spectrum, mi.Bool, list]:
+        result = self.trace(scene, sampler, mi.Ray3f(ray), mi.Bool(active))
+        return result.radiance, dr.any(result.radiance != 0.0) | mi.Bool(True), []
+
+    def aov_names(self) -> list[str]:
+        return []
+
+    def to_string(self) -> str:
+        return f"HGPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}]"
+
+    # ------------------------------------------------------------------ the path loop
+    @dr.syntax
+    def trace(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active: mi.Bool) -> PathResult:
+        kinds = self.context.material_table.kinds
+        has_film = mat.MaterialKind.THIN_FILM in kinds
+        has_grating = mat.MaterialKind.GRATING in kinds
+        span_nm = self.context.bands.wavelength_max_nm - self.context.bands.wavelength_min_nm
+        film_beams = self.kernels.max_beams
+
+        wavelengths = mi.Spectrum(ray.wavelengths)
+        L = mi.Spectrum(0.0)
+        beta = mi.Spectrum(1.0)
+        eta_scale = mi.Float(1.0)
+        depth = mi.UInt32(0)
+        prev_si = dr.zeros(mi.SurfaceInteraction3f)
+        prev_pdf = mi.Float(1.0)
+        prev_delta = mi.Bool(True)
+        prev_skip_emission = mi.Bool(False)
+        # pending coherence resolution (see module docstring)
+        pending = mi.Bool(False)
+        pending_first = mi.Bool(False)
+        chain_distance = mi.Float(0.0)
+        frame_x = mi.Vector3f(0.0)
+        frame_y = mi.Vector3f(0.0)
+        first_frame_x = mi.Vector3f(0.0)
+        first_frame_y = mi.Vector3f(0.0)
+        film_pending = mi.Bool(False)
+        film_separation = mi.Vector3f(0.0)
+        film_terms = [mi.Spectrum(0.0) for _ in range(film_beams if has_film else 0)]
+        # diagnostics accumulators
+        seen_nonspecular = mi.Bool(False)
+        indirect_ready = mi.Bool(False)
+        ind_mxx = mi.Float(0.0)
+        ind_mxy = mi.Float(0.0)
+        ind_myy = mi.Float(0.0)
+        ind_r = mi.Float(0.0)
+        ind_c2 = mi.Float(0.0)
+        ind_s2 = mi.Float(0.0)
+        d_w = mi.Float(0.0)
+        d_mxx = mi.Float(0.0)
+        d_mxy = mi.Float(0.0)
+        d_myy = mi.Float(0.0)
+        d_r = mi.Float(0.0)
+        d_c2 = mi.Float(0.0)
+        d_s2 = mi.Float(0.0)
+        aov_depth = mi.Float(0.0)
+        aov_normal = mi.Vector3f(0.0)
+        aov_albedo = mi.Spectrum(0.0)
+
+        while dr.hint(active, max_iterations=self.max_depth + 1, label="hg_path"):
+            si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
+            valid = active & si.is_valid()
+            segment = dr.select(valid, si.t, 0.0)
+            chain_distance += segment
+
+            material = dr.gather(
+                mi.UInt32, self.context.shape_material, dr.reinterpret_array(mi.UInt32, si.shape), valid
+            )
+            kind = self.kernels.kind(material)
+            emitter_ptr = si.emitter(scene, valid)
+            hit_emitter = valid & (emitter_ptr != None)  # noqa: E711 - Dr.Jit pointer comparison
+            specular = valid & self.kernels.is_specular(material) & ~hit_emitter
+            nonspecular = valid & ~specular & ~hit_emitter
+
+            # First-hit AOVs (camera-visible surface).
+            first = valid & (depth == 0)
+            aov_depth = dr.select(first, si.t, aov_depth)
+            aov_normal = dr.select(first, si.sh_frame.n, aov_normal)
+            aov_albedo = dr.select(first, self.kernels.albedo(material, wavelengths), aov_albedo)
+
+            # --- resolve the pending vertex's incident coherence: the source is what we just reached
+            resolve = pending & (hit_emitter | nonspecular)
+            to_prev = -ray.d
+            em_record = self._emitter_lookup(emitter_ptr)
+            em_sxx, em_sxy, em_syy, _, _ = emitter_coherence(
+                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, si.p, frame_x, frame_y
+            )
+            sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, to_prev, frame_x, frame_y)
+            src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
+            src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
+            src_yy = dr.select(hit_emitter, em_syy, sr_yy)
+            resolved = IncidentCoherence(src_xx, src_xy, src_yy, chain_distance, frame_x, frame_y)
+            if has_film:
+                film_factor = combine_film_terms(
+                    film_terms,
+                    lambda d, c=resolved, v=film_separation: self.visibility(c, v * d, wavelengths),
+                )
+                film_factor = film_factor / dr.maximum(film_terms[0], 1e-12)
+                beta = dr.select(resolve & film_pending, beta * film_factor, beta)
+            record_indirect = resolve & pending_first
+            scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(chain_distance, 1e-9))
+            c2, s2 = self._screen_angle_terms(src_xx, src_xy, src_yy, first_frame_x, first_frame_y)
+            ind_mxx = dr.select(record_indirect, scale2 * src_xx, ind_mxx)
+            ind_mxy = dr.select(record_indirect, scale2 * src_xy, ind_mxy)
+            ind_myy = dr.select(record_indirect, scale2 * src_yy, ind_myy)
+            ind_r = dr.select(record_indirect, chain_distance, ind_r)
+            ind_c2 = dr.select(record_indirect, c2, ind_c2)
+            ind_s2 = dr.select(record_indirect, s2, ind_s2)
+            indirect_ready |= record_indirect
+            pending &= ~resolve
+            film_pending &= ~resolve
+
+            # --- emission reached by BSDF sampling (MIS with the previous vertex's NEE)
+            ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
+            em_pdf = scene.pdf_emitter_direction(prev_si, ds, ~prev_delta)
+            mis = dr.select(prev_delta, 1.0, prev_pdf / dr.maximum(prev_pdf + em_pdf, 1e-20))
+            mis = dr.select(prev_skip_emission, 0.0, mis)
+            emitted = dr.select(hit_emitter, beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)
+            L += emitted
+            weight_em = _luminance(wavelengths, emitted, span_nm)
+            add_indirect = indirect_ready & seen_nonspecular
+            d_w += dr.select(add_indirect, weight_em, 0.0)
+            d_mxx += dr.select(add_indirect, weight_em * ind_mxx, 0.0)
+            d_mxy += dr.select(add_indirect, weight_em * ind_mxy, 0.0)
+            d_myy += dr.select(add_indirect, weight_em * ind_myy, 0.0)
+            d_r += dr.select(add_indirect, weight_em * ind_r, 0.0)
+            d_c2 += dr.select(add_indirect, weight_em * ind_c2, 0.0)
+            d_s2 += dr.select(add_indirect, weight_em * ind_s2, 0.0)
+
+            # --- shading frame (two-sided except for dielectrics)
+            frame = mi.Frame3f(si.sh_frame)
+            wi_world = -ray.d
+            flip = (dr.dot(wi_world, frame.n) < 0) & (kind != int(mat.MaterialKind.DIELECTRIC))
+            frame.n = dr.select(flip, -frame.n, frame.n)
+            frame.t = dr.select(flip, -frame.t, frame.t)
+            wi = frame.to_local(wi_world)
+            continue_path = nonspecular | specular
+            continue_path &= depth + 1 < self.max_depth
+
+            # --- next-event estimation at non-specular vertices
+            do_nee = continue_path & nonspecular
+            ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(do_nee), True, do_nee)
+            do_nee &= ds_em.pdf != 0.0
+            em_record_nee = self._emitter_lookup(ds_em.emitter)
+            nee_dir_guess = dr.normalize(si.p - ds_em.p)
+            nee_fx, nee_fy = self._frame_for(nee_dir_guess)
+            nee_sxx, nee_sxy, nee_syy, nee_r, nee_dir = emitter_coherence(
+                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record_nee, si.p, nee_fx, nee_fy
+            )
+            nee_fx, nee_fy = self._frame_for(nee_dir)
+            nee_sxx, nee_sxy, nee_syy, nee_r, nee_dir = emitter_coherence(
+                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record_nee, si.p, nee_fx, nee_fy
+            )
+            nee_coherence = IncidentCoherence(nee_sxx, nee_sxy, nee_syy, nee_r, nee_fx, nee_fy)
+            wo_em = frame.to_local(ds_em.d)
+            # Coherence-sensitive lobes (gratings) are evaluated towards the emitter's centre (BRIEF).
+            wo_eval = wo_em
+            if has_grating:
+                wo_centre = frame.to_local(-nee_dir)
+                wo_eval = dr.select(kind == int(mat.MaterialKind.GRATING), wo_centre, wo_em)
+            bsdf_value, bsdf_pdf = self.kernels.eval_pdf(
+                material, wi, wo_eval, wavelengths, nee_coherence, frame.n, frame, do_nee
+            )
+            mis_em = dr.select(ds_em.delta, 1.0, ds_em.pdf / dr.maximum(ds_em.pdf + bsdf_pdf, 1e-20))
+            if has_grating:
+                mis_em = dr.select(kind == int(mat.MaterialKind.GRATING), 1.0, mis_em)
+            direct = dr.select(do_nee, beta * bsdf_value * em_weight * mis_em, 0.0)
+            L += direct
+            weight_direct = _luminance(wavelengths, direct, span_nm)
+            # Direct light at the first non-specular vertex: the emitter's own Σ⊥ (camera-aligned frame).
+            at_first = do_nee & ~seen_nonspecular
+            nee_scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(nee_r, 1e-9))
+            nee_c2, nee_s2 = self._screen_angle_terms(nee_sxx, nee_sxy, nee_syy, nee_fx, nee_fy)
+            direct_m = (nee_scale2 * nee_sxx, nee_scale2 * nee_sxy, nee_scale2 * nee_syy)
+            use_ind = do_nee & seen_nonspecular & indirect_ready
+            w_first = dr.select(at_first, weight_direct, 0.0)
+            w_later = dr.select(use_ind, weight_direct, 0.0)
+            d_w += w_first + w_later
+            d_mxx += w_first * direct_m[0] + w_later * ind_mxx
+            d_mxy += w_first * direct_m[1] + w_later * ind_mxy
+            d_myy += w_first * direct_m[2] + w_later * ind_myy
+            d_r += w_first * nee_r + w_later * ind_r
+            d_c2 += w_first * nee_c2 + w_later * ind_c2
+            d_s2 += w_first * nee_s2 + w_later * ind_s2
+
+            # --- sample the next direction
+            wo, weight, pdf, delta, sampled_film_terms = self.kernels.sample(
+                material,
+                wi,
+                wavelengths,
+                sampler.next_1d(continue_path),
+                sampler.next_2d(continue_path),
+                continue_path,
+            )
+            wo_world = frame.to_world(wo)
+            beta = dr.select(continue_path, beta * weight, 0.0)
+
+            # Start a new pending record at a non-specular vertex; carry it through specular ones.
+            new_record = continue_path & nonspecular
+            incoming_fx, incoming_fy = self._frame_for(-wo_world)
+            frame_x = dr.select(new_record, incoming_fx, frame_x)
+            frame_y = dr.select(new_record, incoming_fy, frame_y)
+            first_frame_x = dr.select(new_record & ~seen_nonspecular, incoming_fx, first_frame_x)
+            first_frame_y = dr.select(new_record & ~seen_nonspecular, incoming_fy, first_frame_y)
+            pending_first = dr.select(new_record, ~seen_nonspecular, pending_first)
+            pending |= new_record
+            chain_distance = dr.select(new_record, 0.0, chain_distance)
+            if has_film:
+                is_film = new_record & (kind == int(mat.MaterialKind.THIN_FILM)) & ~delta
+                film_pending = dr.select(new_record, is_film, film_pending)
+                thickness = self.kernels.param(material, mat.FILM_THICKNESS_M)
+                film_separation = dr.select(is_film, frame.n * thickness, film_separation)
+                for index in range(film_beams):
+                    film_terms[index] = dr.select(is_film, sampled_film_terms[index], film_terms[index])
+            # Through a perfect mirror / refraction the carried vectors follow the beam.
+            through_specular = continue_path & specular & pending
+            frame_x = dr.select(through_specular, _reflect_vector(frame_x, frame.n), frame_x)
+            frame_y = dr.select(through_specular, _reflect_vector(frame_y, frame.n), frame_y)
+            film_separation = dr.select(
+                through_specular, _reflect_vector(film_separation, frame.n), film_separation
+            )
+            seen_nonspecular |= nonspecular
+
+            prev_si = si
+            prev_pdf = pdf
+            prev_delta = delta
+            prev_skip_emission = dr.select(nonspecular, kind == int(mat.MaterialKind.GRATING), False) & ~delta
+            ray = si.spawn_ray(wo_world)
+
+            # Russian roulette
+            beta_max = dr.max(beta)
+            rr_active = depth >= self.rr_depth
+            rr_probability = dr.minimum(beta_max * dr.square(eta_scale), 0.95)
+            survive = sampler.next_1d(continue_path) < rr_probability
+            beta = dr.select(rr_active, beta * dr.rcp(dr.maximum(rr_probability, 1e-6)), beta)
+            active = continue_path & (beta_max > 0.0) & (~rr_active | survive)
+            depth += 1
+
+        return PathResult(L, d_w, d_mxx, d_mxy, d_myy, d_r, d_c2, d_s2, aov_depth, aov_normal, aov_albedo)
+
+
+def register() -> None:
+    """Register ``hg_path`` with Mitsuba (idempotent)."""
+    mi.register_integrator("hg_path", lambda props: HGPathIntegrator(props))

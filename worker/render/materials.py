@@ -1,0 +1,101 @@
+"""Material table: the per-material parameters that ``hg_path`` gathers inside its kernel.
+
+Every material of the scene becomes one fixed-stride float32 record; spectral parameters (reflectance,
+refractive indices) are ids into a ``SpectralTable``. The integrator maps a hit shape to its material
+through the shape's Dr.Jit registry id, so the Mitsuba BSDF attached to a shape is never consulted by
+``hg_path`` (it only serves Mitsuba's own integrators in reference comparisons).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+
+
+class MaterialKind(IntEnum):
+    DIFFUSE = 0
+    MIRROR = 1
+    DIELECTRIC = 2
+    ROUGH_CONDUCTOR = 3
+    ROUGH_DIELECTRIC = 4
+    THIN_FILM = 5
+    GRATING = 6
+    BLACK = 7  # emitter surfaces: absorb everything
+
+
+# Parameter offsets inside one record.
+KIND = 0
+REFLECTANCE_ID = 1  # diffuse reflectance spectrum
+ETA_ID = 2  # conductor n, dielectric / substrate index
+KAPPA_ID = 3  # conductor extinction κ (a zero spectrum for dielectrics)
+EXTERIOR_IOR = 4
+ROUGHNESS_RMS_M = 5
+CORRELATION_LENGTH_M = 6
+PSD_KIND = 7  # 0 Gaussian, 1 ABC (K-correlation)
+PSD_EXPONENT = 8
+SCATTERING_REGION_RADIUS_M = 9
+FILM_THICKNESS_M = 10
+FILM_IOR_ID = 11
+BEAMS = 12
+PITCH_X_M = 13
+PITCH_Y_M = 14  # 0 for a 1-D grating
+ORIENTATION_RAD = 15
+DUTY = 16
+PIT_DEPTH_M = 17
+PIT_IOR = 18
+LOBE_WIDTH_PER_M = 19
+MAX_ORDER = 20
+DISPERSIVE = 21  # 1 when the dielectric index varies with wavelength
+STRIDE = 22
+
+DEFAULT_SCATTERING_REGION_RADIUS_M = 1e-3
+
+# Materials whose response is a Dirac delta (coherence kept, r accumulated: paper §5, "Perfectly specular").
+SPECULAR_KINDS = frozenset({MaterialKind.MIRROR, MaterialKind.DIELECTRIC})
+
+
+@dataclass
+class MaterialRecord:
+    """One material: its kind, table values (offset -> value) and, for the statistical and diffractive
+    kinds, the optics model object whose constants are compiled into the kernel
+    (``worker.optics.rough_surface.RoughSurface`` or ``worker.optics.grating.BinaryGrating``)."""
+
+    kind: MaterialKind
+    values: dict[int, float] = field(default_factory=dict)
+    model: Any = None
+
+    def as_row(self) -> np.ndarray:
+        row = np.zeros(STRIDE, dtype=np.float32)
+        row[KIND] = float(self.kind)
+        row[SCATTERING_REGION_RADIUS_M] = DEFAULT_SCATTERING_REGION_RADIUS_M
+        row[EXTERIOR_IOR] = 1.0
+        for offset, value in self.values.items():
+            row[offset] = value
+        return row
+
+
+@dataclass
+class MaterialTable:
+    records: list[MaterialRecord] = field(default_factory=list)
+
+    def add(self, record: MaterialRecord) -> int:
+        self.records.append(record)
+        return len(self.records) - 1
+
+    def flat(self) -> np.ndarray:
+        rows = [record.as_row() for record in self.records] or [MaterialRecord(MaterialKind.BLACK).as_row()]
+        return np.concatenate(rows)
+
+    @property
+    def kinds(self) -> set[MaterialKind]:
+        return {record.kind for record in self.records}
+
+    def indices_of(self, kind: MaterialKind) -> list[int]:
+        return [index for index, record in enumerate(self.records) if record.kind == kind]
+
+    def max_beams(self) -> int:
+        beams = [int(r.values.get(BEAMS, 0)) for r in self.records if r.kind == MaterialKind.THIN_FILM]
+        return max(beams, default=0)

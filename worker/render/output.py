@@ -1,0 +1,194 @@
+"""Final images from merged per-pixel sums: spectral OpenEXR, variance EXR, preview PNG, summary JSON.
+
+``image.exr`` follows Fichet, Pacanowski & Wilkie (JCGT 10(3), 2021): emissive channels ``S0.<λ>nm``
+(band centres, six decimals, comma separator), attributes ``spectralLayoutVersion`` = ``1.0`` and
+``emissiveUnits`` = ``W.m^-2.sr^-1``; ``R``, ``G``, ``B`` linear sRGB (CIE 1931 2°, D65 white, XYZ from
+the bands); the BRIEF's ``coherence.*`` diagnostics; ``depth`` (m), ``normal.X/Y/Z`` (world) and
+``albedo.R/G/B`` of the first hit. ``variance.exr`` holds the variance of each band's pixel mean
+(σ²/N, from the per-sample second moments) for noise-aware regression tests. Writes are atomic.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from worker.optics import spectra
+from worker.optics.coherence import diagnostics_components
+from worker.render.renderer import PixelSums
+from worker.render.spectral import LAMBDA_REFERENCE_NM, BandLayout
+
+K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)
+COHERENCE_CHANNELS = ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy")
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(data)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def band_cmf_weights(bands: BandLayout, step_nm: float = 1.0) -> np.ndarray:
+    """∫_band (x̄, ȳ, z̄) dλ per band (nm), shape (B, 3): XYZ = Σ_b L_b · weight_b."""
+    weights = np.zeros((bands.band_count, 3))
+    edges = bands.edges_nm
+    for band in range(bands.band_count):
+        grid = np.arange(edges[band], edges[band + 1] + 0.5 * step_nm, step_nm)
+        grid = np.clip(grid, edges[band], edges[band + 1])
+        weights[band] = np.trapezoid(spectra.cie_cmf(grid), grid, axis=0)
+    return weights
+
+
+def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray]:
+    """Per-pixel means and diagnostics (float32 arrays of shape (H, W) or (H, W, B))."""
+    count = float(sums.sample_count)
+    band_mean = sums.bands / count
+    band_variance = np.maximum(sums.bands_sq / count - band_mean**2, 0.0) / count
+    xyz = band_mean @ band_cmf_weights(bands)
+    rgb = spectra.xyz_to_linear_srgb(xyz)
+    values = sums.values
+    weight = values["diag_w"]
+    covered = weight > 0
+    safe = np.where(covered, weight, 1.0)
+    m_xx, m_xy, m_yy = (
+        np.where(covered, values[key] / safe, 0.0) for key in ("diag_mxx", "diag_mxy", "diag_myy")
+    )
+    r_mean = np.where(covered, values["diag_r"] / safe, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (k/r)² Σ with r = k gives M itself: the diagnostics are computed from M directly.
+        diag = diagnostics_components(m_xx, m_xy, m_yy, K_REFERENCE_PER_M, LAMBDA_REFERENCE_NM * 1e-9)
+    angle = 0.5 * np.arctan2(values["diag_s2"], values["diag_c2"])
+    coherence = {
+        "l1_um": diag.l1_um,
+        "l2_um": diag.l2_um,
+        "angle": angle,
+        "anisotropy": diag.anisotropy,
+        "area_um2": diag.area_um2,
+        "r_m": r_mean,
+        "Mxx": m_xx,
+        "Mxy": m_xy,
+        "Myy": m_yy,
+    }
+    coherence = {
+        key: np.where(covered, np.nan_to_num(value, nan=0.0, posinf=0.0), 0.0)
+        for key, value in coherence.items()
+    }
+    albedo_xyz = np.stack([values[f"albedo_{c}"] for c in "xyz"], axis=-1) / count
+    return {
+        "bands": band_mean.astype(np.float32),
+        "band_variance": band_variance.astype(np.float32),
+        "rgb": rgb.astype(np.float32),
+        "depth": (values["depth"] / count).astype(np.float32),
+        "normal": (np.stack([values[f"normal_{c}"] for c in "xyz"], axis=-1) / count).astype(np.float32),
+        "albedo": spectra.xyz_to_linear_srgb(albedo_xyz).astype(np.float32),
+        "luminance_variance": (
+            np.maximum(values["luminance_sq"] / count - (values["luminance"] / count) ** 2, 0.0) / count
+        ).astype(np.float32),
+        **{f"coherence.{key}": value.astype(np.float32) for key, value in coherence.items()},
+        "coherence.weight": (weight / count).astype(np.float32),
+    }
+
+
+def _write_exr(path: Path, channels: list[tuple[str, np.ndarray]], attributes: dict[str, str]) -> None:
+    import OpenImageIO as oiio  # noqa: N813 - the library's customary alias
+
+    height, width = channels[0][1].shape
+    pixels = np.stack([data for _, data in channels], axis=-1).astype(np.float32)
+    spec = oiio.ImageSpec(width, height, len(channels), "float")
+    spec.channelnames = tuple(name for name, _ in channels)
+    spec.attribute("compression", "zip")
+    for key, value in attributes.items():
+        spec.attribute(key, value)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".exr")
+    os.close(handle)
+    try:
+        output = oiio.ImageOutput.create(temporary)
+        if output is None or not output.open(temporary, spec):
+            raise OSError(f"cannot write {path}: {oiio.geterror()}")
+        ok = output.write_image(pixels)
+        output.close()
+        if not ok:
+            raise OSError(f"cannot write {path}: {oiio.geterror()}")
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+SPECTRAL_ATTRIBUTES = {"spectralLayoutVersion": "1.0", "emissiveUnits": "W.m^-2.sr^-1"}
+
+
+def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path) -> list[str]:
+    """image.exr, variance.exr and preview.png into ``out_dir``; returns the file names."""
+    names = bands.channel_names()
+    channels = [("R", images["rgb"][..., 0]), ("G", images["rgb"][..., 1]), ("B", images["rgb"][..., 2])]
+    channels += [(name, images["bands"][..., b]) for b, name in enumerate(names)]
+    channels += [(f"coherence.{key}", images[f"coherence.{key}"]) for key in (*COHERENCE_CHANNELS, "weight")]
+    channels += [("depth", images["depth"])]
+    channels += [(f"normal.{axis}", images["normal"][..., i]) for i, axis in enumerate("XYZ")]
+    channels += [(f"albedo.{c}", images["albedo"][..., i]) for i, c in enumerate("RGB")]
+    _write_exr(out_dir / "image.exr", channels, SPECTRAL_ATTRIBUTES)
+    variance = [(name, images["band_variance"][..., b]) for b, name in enumerate(names)]
+    variance.append(("Y", images["luminance_variance"]))
+    _write_exr(out_dir / "variance.exr", variance, SPECTRAL_ATTRIBUTES)
+    atomic_write_bytes(out_dir / "preview.png", preview_png(images["rgb"]))
+    return ["image.exr", "variance.exr", "preview.png"]
+
+
+def tone_map(rgb: np.ndarray, exposure_ev: float = 0.0) -> np.ndarray:
+    """8-bit sRGB: linear × 2^EV, clamp, sRGB transfer curve (IEC 61966-2-1)."""
+    linear = np.clip(rgb * (2.0**exposure_ev), 0.0, 1.0)
+    encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1 / 2.4) - 0.055)
+    return np.round(encoded * 255.0).astype(np.uint8)
+
+
+def auto_exposure_ev(rgb: np.ndarray) -> float:
+    """EV that maps the 99th percentile of luminance to 1 (0 for a black image)."""
+    luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    high = float(np.percentile(luminance, 99.0))
+    return 0.0 if high <= 0 or not math.isfinite(high) else -math.log2(high)
+
+
+def preview_png(rgb: np.ndarray) -> bytes:
+    import io
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(tone_map(rgb, auto_exposure_ev(rgb))).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+def coherence_statistics(images: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Mean and percentiles of ℓ₁, ℓ₂, anisotropy and area over pixels with diagnostics."""
+    covered = images["coherence.weight"] > 0
+    stats: dict[str, Any] = {"covered_pixels": int(covered.sum())}
+    for key in ("l1_um", "l2_um", "anisotropy", "area_um2", "r_m"):
+        values = images[f"coherence.{key}"][covered]
+        if values.size == 0:
+            stats[key] = None
+            continue
+        stats[key] = {
+            "mean": float(values.mean()),
+            "p5": float(np.percentile(values, 5)),
+            "p50": float(np.percentile(values, 50)),
+            "p95": float(np.percentile(values, 95)),
+        }
+    return stats
+
+
+def write_summary(out_dir: Path, summary: dict[str, Any]) -> None:
+    atomic_write_bytes(out_dir / "summary.json", json.dumps(summary, indent=2, sort_keys=True).encode())

@@ -1,0 +1,253 @@
+"""Runs ``hg_path`` over the image and reduces samples into per-pixel sums (deterministically).
+
+Samples are laid out pixel-major (wavefront index = pixel·spp + s) and reduced with ``dr.block_sum``, so
+sums do not depend on thread scheduling: the same scene, spp and seed give bitwise-identical output, which
+scatter-based (atomic) film accumulation would not. Passes bound the wavefront size; sums are accumulated
+in float64 on the host. A chunk is a set of passes with its own seed; chunks merge by adding sums.
+
+Kernel compilation: Dr.Jit caches compiled kernels by the hash of their IR (in memory and on disk under
+``~/.drjit``), so a second render of a scene with the same structure and constants skips compilation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import drjit as dr
+import numpy as np
+
+from worker.mitsuba_setup import load_mitsuba
+from worker.optics.sources import source_coefficients
+from worker.render.integrator import HGPathIntegrator, RenderContext, register
+from worker.render.scene_compiler import CompiledScene
+
+MAX_WAVEFRONT = 1 << 21
+SUM_KEYS = (
+    "diag_w",
+    "diag_mxx",
+    "diag_mxy",
+    "diag_myy",
+    "diag_r",
+    "diag_c2",
+    "diag_s2",
+    "depth",
+    "normal_x",
+    "normal_y",
+    "normal_z",
+    "albedo_x",
+    "albedo_y",
+    "albedo_z",
+    "luminance",
+    "luminance_sq",
+)
+
+
+def pass_seed(chunk_seed: int, pass_index: int) -> int:
+    """A 32-bit seed per pass, distinct across chunks and passes (deterministic)."""
+    return (chunk_seed * 0x9E3779B1 + pass_index * 0x85EBCA77 + 0x165667B1) & 0xFFFFFFFF
+
+
+@dataclass
+class PixelSums:
+    """Per-pixel sums over ``sample_count`` samples per pixel (float64, shape (H, W[, B]))."""
+
+    sample_count: int
+    bands: np.ndarray
+    bands_sq: np.ndarray
+    values: dict[str, np.ndarray]
+
+    def add(self, other: PixelSums) -> PixelSums:
+        return PixelSums(
+            self.sample_count + other.sample_count,
+            self.bands + other.bands,
+            self.bands_sq + other.bands_sq,
+            {key: self.values[key] + other.values[key] for key in self.values},
+        )
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "sample_count": np.array(self.sample_count),
+            "bands": self.bands,
+            "bands_sq": self.bands_sq,
+            **{f"v_{key}": value for key, value in self.values.items()},
+        }
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> PixelSums:
+        return cls(
+            int(arrays["sample_count"]),
+            arrays["bands"],
+            arrays["bands_sq"],
+            {key: arrays[f"v_{key}"] for key in SUM_KEYS},
+        )
+
+
+class Renderer:
+    """One loaded Mitsuba scene plus the ``hg_path`` integrator attached to its tables."""
+
+    def __init__(self, compiled: CompiledScene, variant: str | None = None) -> None:
+        self.mi = mi = load_mitsuba(variant)
+        register()
+        self.compiled = compiled
+        # optimize=False: merged shapes would lose the ids that map them to materials.
+        self.scene = mi.load_dict(compiled.mitsuba_dict, optimize=False)
+        self.sensor = self.scene.sensors()[0]
+        self.width, self.height = compiled.scene.film.width, compiled.scene.film.height
+        self.integrator = HGPathIntegrator(mi.Properties())
+        self.integrator.max_depth = compiled.scene.film.max_depth
+        self.integrator.attach(self._context())
+
+    def _context(self) -> RenderContext:
+        mi = self.mi
+        compiled = self.compiled
+        shapes = list(self.scene.shapes())
+        shape_ids = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0]) for shape in shapes]
+        shape_material = np.full(
+            max(shape_ids) + 1, len(compiled.material_table.records) - 1, dtype=np.uint32
+        )
+        emitter_ids: dict[int, int] = {}
+        for shape, registry_id in zip(shapes, shape_ids, strict=True):
+            key = shape.id()
+            shape_material[registry_id] = compiled.shape_materials[key]
+            if key in compiled.emitter_records:
+                emitter_id = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(shape.emitter()))[0])
+                emitter_ids[emitter_id] = compiled.emitter_records[key]
+        emitter_index = np.zeros(max(emitter_ids, default=0) + 1, dtype=np.uint32)
+        for registry_id, record in emitter_ids.items():
+            emitter_index[registry_id] = record
+        right, up = self._screen_axes()
+        kinds = {record.kind for record in compiled.emitter_table.records}
+        return RenderContext(
+            bands=compiled.bands,
+            material_table=compiled.material_table,
+            material_flat=mi.Float(compiled.material_table.flat()),
+            spectra_flat=mi.Float(compiled.spectral_table.flat()),
+            shape_material=mi.UInt32(shape_material),
+            emitter_flat=mi.Float(compiled.emitter_table.flat()),
+            emitter_index=mi.UInt32(emitter_index),
+            emitter_kinds=kinds,
+            coefficients=source_coefficients("disk", compiled.scene.film.modes),
+            camera_right=mi.Vector3f(*right),
+            camera_up=mi.Vector3f(*up),
+        )
+
+    def _screen_axes(self) -> tuple[list[float], list[float]]:
+        """World directions of the image's +x (right) and up, from rays through the image centre."""
+        mi = self.mi
+        positions = mi.Point2f([0.5, 0.51, 0.5], [0.5, 0.5, 0.49])
+        ray, _ = self.sensor.sample_ray(0.0, mi.Float(0.5), positions, mi.Point2f(0.5))
+        d = np.array(ray.d)
+        right = d[:, 1] - d[:, 0]
+        up = d[:, 2] - d[:, 0]
+        right -= np.dot(right, d[:, 0]) * d[:, 0]
+        up -= np.dot(up, d[:, 0]) * d[:, 0]
+        return (right / np.linalg.norm(right)).tolist(), (up / np.linalg.norm(up)).tolist()
+
+    def render_sums(
+        self,
+        spp: int,
+        seed: int,
+        progress: Callable[[float], None] | None = None,
+        should_stop: Callable[[], bool] | None = None,
+    ) -> PixelSums:
+        """Per-pixel sums of ``spp`` samples per pixel with ``seed``; raises ``RenderCanceledError`` on stop."""
+        pixels = self.width * self.height
+        spp_per_pass = max(1, min(spp, MAX_WAVEFRONT // max(pixels, 1)))
+        total: PixelSums | None = None
+        done = 0
+        pass_index = 0
+        while done < spp:
+            if should_stop is not None and should_stop():
+                raise RenderCanceledError("render stopped on request")
+            count = min(spp_per_pass, spp - done)
+            result = self._render_pass(count, pass_seed(seed, pass_index))
+            total = result if total is None else total.add(result)
+            done += count
+            pass_index += 1
+            if progress is not None:
+                progress(done / spp)
+        assert total is not None
+        return total
+
+    def _render_pass(self, spp: int, seed: int) -> PixelSums:
+        mi = self.mi
+        bands = self.compiled.bands
+        width, height = self.width, self.height
+        wavefront = width * height * spp
+        index = dr.arange(mi.UInt32, wavefront)
+        pixel = index // spp
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, wavefront)
+        pixel_x = mi.Float(pixel % width)
+        pixel_y = mi.Float(pixel // width)
+        film_position = mi.Point2f(
+            (pixel_x + sampler.next_1d()) / width, (pixel_y + sampler.next_1d()) / height
+        )
+        ray, _ = self.sensor.sample_ray(0.0, sampler.next_1d(), film_position, sampler.next_2d())
+        span = bands.wavelength_max_nm - bands.wavelength_min_nm
+        offset = sampler.next_1d()
+        wavelengths = mi.Spectrum(0.0)
+        lane_count = len(wavelengths)
+        for j in range(lane_count):
+            fraction = offset + j / lane_count
+            wavelengths[j] = bands.wavelength_min_nm + span * (fraction - dr.floor(fraction))
+        ray = mi.Ray3f(ray.o, ray.d, ray.maxt, ray.time, wavelengths)
+        result = self.integrator.trace(self.scene, sampler, ray, mi.Bool(True))
+
+        band_scale = span / bands.width_nm / lane_count
+        band_values = []
+        for band in range(bands.band_count):
+            value = mi.Float(0.0)
+            for j in range(lane_count):
+                band_of_lane = mi.UInt32(
+                    dr.clip(
+                        (wavelengths[j] - bands.wavelength_min_nm) / bands.width_nm, 0, bands.band_count - 1
+                    )
+                )
+                value += dr.select(band_of_lane == band, result.radiance[j], 0.0)
+            band_values.append(value * band_scale)
+        xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
+        albedo_xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
+        for j in range(lane_count):
+            cmf = mi.cie1931_xyz(wavelengths[j])
+            for c in range(3):
+                xyz[c] += cmf[c] * result.radiance[j] * (span / lane_count)
+                albedo_xyz[c] += cmf[c] * result.albedo[j] * (span / lane_count) / mi.MI_CIE_Y_NORMALIZATION
+        per_sample = {
+            "diag_w": result.diag_weight,
+            "diag_mxx": result.diag_mxx,
+            "diag_mxy": result.diag_mxy,
+            "diag_myy": result.diag_myy,
+            "diag_r": result.diag_r,
+            "diag_c2": result.diag_cos2,
+            "diag_s2": result.diag_sin2,
+            "depth": result.depth_m,
+            "normal_x": result.normal.x,
+            "normal_y": result.normal.y,
+            "normal_z": result.normal.z,
+            "albedo_x": albedo_xyz[0],
+            "albedo_y": albedo_xyz[1],
+            "albedo_z": albedo_xyz[2],
+            "luminance": xyz[1],
+            "luminance_sq": dr.square(xyz[1]),
+        }
+        reduced_bands = [dr.block_sum(v, spp) for v in band_values]
+        reduced_bands_sq = [dr.block_sum(dr.square(v), spp) for v in band_values]
+        reduced = {key: dr.block_sum(value, spp) for key, value in per_sample.items()}
+        dr.eval(reduced_bands, reduced_bands_sq, reduced)
+        shape = (height, width)
+        return PixelSums(
+            sample_count=spp,
+            bands=np.stack([np.asarray(v, dtype=np.float64).reshape(shape) for v in reduced_bands], axis=-1),
+            bands_sq=np.stack(
+                [np.asarray(v, dtype=np.float64).reshape(shape) for v in reduced_bands_sq], axis=-1
+            ),
+            values={
+                key: np.asarray(value, dtype=np.float64).reshape(shape) for key, value in reduced.items()
+            },
+        )
+
+
+class RenderCanceledError(Exception):
+    """A render stopped because ``should_stop`` returned True."""

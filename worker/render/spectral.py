@@ -1,0 +1,98 @@
+"""Spectral bands, wavelength sampling and spectral lookup tables for the ``hg_path`` integrator.
+
+Each camera sample carries four wavelengths (Mitsuba's spectral variants are four-wide), drawn by
+stratified hero-wavelength sampling over [λ_min, λ_max]: λ_j = λ_min + Λ·frac(u + j/4), Λ = λ_max − λ_min,
+each with pdf 1/Λ (nm⁻¹). Band b of width Δ_b is then estimated per sample as
+(1/4) Σ_j L(λ_j)·1_b(λ_j)·Λ/Δ_b, an unbiased estimator of the band-averaged spectral radiance
+(1/Δ_b)∫_b L dλ in W·m⁻²·sr⁻¹·nm⁻¹.
+
+Material spectra (reflectances, refractive indices) live in one flat table sampled on a regular grid
+(``GRID_MIN_NM`` … ``GRID_MAX_NM`` every ``GRID_STEP_NM``) and are linearly interpolated in the kernel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+GRID_MIN_NM = 200.0
+GRID_MAX_NM = 2500.0
+GRID_STEP_NM = 5.0
+GRID_SIZE = round((GRID_MAX_NM - GRID_MIN_NM) / GRID_STEP_NM) + 1
+LAMBDA_REFERENCE_NM = 550.0  # diagnostics are reported at this wavelength (BRIEF)
+
+
+def grid_wavelengths_nm() -> np.ndarray:
+    """The wavelengths (nm) of the spectral lookup grid."""
+    return GRID_MIN_NM + GRID_STEP_NM * np.arange(GRID_SIZE)
+
+
+@dataclass(frozen=True)
+class BandLayout:
+    """``band_count`` equal bands over [wavelength_min_nm, wavelength_max_nm]."""
+
+    wavelength_min_nm: float
+    wavelength_max_nm: float
+    band_count: int
+
+    @property
+    def width_nm(self) -> float:
+        return (self.wavelength_max_nm - self.wavelength_min_nm) / self.band_count
+
+    @property
+    def centers_nm(self) -> np.ndarray:
+        return self.wavelength_min_nm + self.width_nm * (np.arange(self.band_count) + 0.5)
+
+    @property
+    def edges_nm(self) -> np.ndarray:
+        return self.wavelength_min_nm + self.width_nm * np.arange(self.band_count + 1)
+
+    def channel_names(self) -> list[str]:
+        """Spectral EXR channel names (Fichet et al. 2021): ``S0.<λ>nm`` with a comma decimal separator."""
+        return ["S0." + f"{center:.6f}".replace(".", ",") + "nm" for center in self.centers_nm]
+
+
+class SpectralTable:
+    """Builds the flat (spectrum id × grid) table that kernels interpolate."""
+
+    def __init__(self) -> None:
+        self._rows: list[np.ndarray] = []
+        self._index: dict[bytes, int] = {}
+
+    def add(self, values_on_grid: np.ndarray) -> int:
+        """Register a spectrum sampled on ``grid_wavelengths_nm()``; identical spectra share one id."""
+        row = np.asarray(values_on_grid, dtype=np.float32)
+        if row.shape != (GRID_SIZE,):
+            raise ValueError(f"spectrum: expected {GRID_SIZE} grid samples, got shape {row.shape}")
+        if not np.all(np.isfinite(row)):
+            raise ValueError("spectrum: values must be finite")
+        key = row.tobytes()
+        if key not in self._index:
+            self._index[key] = len(self._rows)
+            self._rows.append(row)
+        return self._index[key]
+
+    def add_constant(self, value: float) -> int:
+        return self.add(np.full(GRID_SIZE, value, dtype=np.float32))
+
+    def flat(self) -> np.ndarray:
+        if not self._rows:
+            return np.zeros(GRID_SIZE, dtype=np.float32)
+        return np.concatenate(self._rows)
+
+
+def lookup(mi, table, spectrum_id, wavelengths):
+    """Interpolate spectrum ``spectrum_id`` (UInt32 per lane) of ``table`` at ``wavelengths`` (nm)."""
+    import drjit as dr
+
+    result = mi.Spectrum(0.0)
+    base = spectrum_id * GRID_SIZE
+    for j in range(len(wavelengths)):
+        position = dr.clip((wavelengths[j] - GRID_MIN_NM) / GRID_STEP_NM, 0.0, GRID_SIZE - 1.001)
+        index = mi.UInt32(dr.floor(position))
+        fraction = position - mi.Float(index)
+        lower = dr.gather(mi.Float, table, base + index)
+        upper = dr.gather(mi.Float, table, base + index + 1)
+        result[j] = dr.lerp(lower, upper, fraction)
+    return result
