@@ -1,0 +1,263 @@
+"""``hgrender serve | worker | submit | status | list | cancel | download | token``: run the service and
+talk to it.
+
+``serve`` runs the API (uvicorn) plus ``--workers`` queue workers as child processes (restarted if they
+die) and, when ``REDIS_URL`` is unset, a private ``redis-server`` with its data under ``<data dir>/redis``;
+it writes a first admin token to ``<data dir>/admin.token``. The client commands find the server in
+``--url`` / ``HGRENDER_URL`` and the token in ``--token`` / ``HGRENDER_TOKEN`` / ``<data dir>/admin.token``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+from hgrender.cli import CliError
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    serve = subparsers.add_parser("serve", help="run API + workers (+ private Redis if REDIS_URL is unset)")
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--data-dir", type=Path, default=Path("./data"))
+    serve.add_argument("--workers", type=int, default=None, help="queue workers (default: cores // 2, min 1)")
+    serve.set_defaults(handler=serve_command)
+
+    worker = subparsers.add_parser("worker", help="run one queue worker against REDIS_URL and the store")
+    worker.add_argument("--burst", action="store_true", help="exit when the queues are empty")
+    worker.add_argument("--name", default=None, help="worker name (default: host name + random suffix)")
+    worker.set_defaults(handler=worker_command)
+
+    client_options = argparse.ArgumentParser(add_help=False)
+    client_options.add_argument("--url", default=os.environ.get("HGRENDER_URL", DEFAULT_URL))
+    client_options.add_argument("--token", default=os.environ.get("HGRENDER_TOKEN"))
+    client_options.add_argument(
+        "--data-dir", type=Path, default=Path("./data"), help="where to find admin.token when no --token"
+    )
+
+    submit = subparsers.add_parser("submit", parents=[client_options], help="submit a scene file")
+    submit.add_argument("scene", type=Path, help=".json scene, .usda/.usdc/.usdz or a .zip bundle")
+    submit.add_argument("--wait", action="store_true", help="follow progress until the job finishes")
+    submit.add_argument("--spp", type=int, default=None)
+    submit.add_argument("--chunks", type=int, default=None)
+    submit.add_argument("--seed", type=int, default=None)
+    submit.add_argument("--priority", choices=("high", "normal", "low"), default="normal")
+    submit.add_argument("--idempotency-key", default=None)
+    submit.set_defaults(handler=submit_command)
+
+    status = subparsers.add_parser("status", parents=[client_options], help="show a job")
+    status.add_argument("job_id")
+    status.set_defaults(handler=status_command)
+
+    listing = subparsers.add_parser("list", parents=[client_options], help="list jobs")
+    listing.add_argument(
+        "--status", default=None, choices=("queued", "running", "succeeded", "failed", "canceled")
+    )
+    listing.add_argument("--limit", type=int, default=50)
+    listing.set_defaults(handler=list_command)
+
+    cancel = subparsers.add_parser("cancel", parents=[client_options], help="cancel a job")
+    cancel.add_argument("job_id")
+    cancel.set_defaults(handler=cancel_command)
+
+    download = subparsers.add_parser("download", parents=[client_options], help="download a job's artifacts")
+    download.add_argument("job_id")
+    download.add_argument("-o", "--output", type=Path, default=None, help="directory (default: ./<job id>)")
+    download.set_defaults(handler=download_command)
+
+    token = subparsers.add_parser("token", help="manage API tokens")
+    token_commands = token.add_subparsers(dest="token_command", required=True)
+    create = token_commands.add_parser("create", parents=[client_options], help="create a token (admin)")
+    create.add_argument("--scopes", default="submit,read", help="comma-separated: submit, read, admin")
+    create.add_argument("--owner", required=True)
+    create.add_argument("--name", default="")
+    create.set_defaults(handler=token_create_command)
+
+
+# ---- server side ---------------------------------------------------------------------------------------
+
+
+class WorkerSupervisor:
+    """Keeps ``count`` ``hgrender worker`` child processes alive (a crashed worker is replaced)."""
+
+    def __init__(self, count: int, env: dict[str, str]) -> None:
+        self.count = count
+        self.env = env
+        self.processes: list[subprocess.Popen[bytes]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._supervise, name="worker-supervisor", daemon=True)
+
+    def _spawn(self) -> subprocess.Popen[bytes]:
+        return subprocess.Popen([sys.executable, "-m", "hgrender.cli", "worker"], env=self.env)
+
+    def start(self) -> None:
+        self.processes = [self._spawn() for _ in range(self.count)]
+        self._thread.start()
+
+    def _supervise(self) -> None:
+        while not self._stop.wait(1.0):
+            for i, process in enumerate(self.processes):
+                if process.poll() is not None and not self._stop.is_set():
+                    self.processes[i] = self._spawn()
+
+    def stop(self, timeout_s: float = 30.0) -> None:
+        """Warm shutdown (SIGTERM: RQ finishes nothing new and exits), SIGKILL after ``timeout_s``."""
+        self._stop.set()
+        for process in self.processes:
+            if process.poll() is None:
+                process.terminate()
+        for process in self.processes:
+            try:
+                process.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                process.kill()
+
+
+def serve_command(args: argparse.Namespace) -> int:
+    import redis
+    import uvicorn
+
+    from service.auth import ensure_admin_token
+    from service.core.config import Settings
+    from service.main import create_app
+    from service.redis_server import RedisServer
+
+    data_dir: Path = args.data_dir.resolve()
+    overrides: dict[str, Any] = {"data_dir": data_dir}
+    if args.workers is not None:
+        overrides["workers"] = args.workers
+    settings = Settings(**overrides)
+    redis_server = None
+    if not settings.redis_url:
+        redis_server = RedisServer(data_dir / "redis").start()
+        settings = settings.model_copy(update={"redis_url": redis_server.url})
+    try:
+        if settings.auth_enabled:
+            client = redis.Redis.from_url(settings.redis_url)
+            ensure_admin_token(client, data_dir / "admin.token")
+            client.close()
+            print(f"admin token: {data_dir / 'admin.token'}", file=sys.stderr)
+        env = {**os.environ, **settings.to_env()}
+        supervisor = WorkerSupervisor(settings.worker_count, env)
+        supervisor.start()
+        # Issue 7's cron scheduler is started here, next to the workers, with the same environment.
+        try:
+            uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="warning")
+        finally:
+            supervisor.stop()
+    finally:
+        if redis_server is not None:
+            redis_server.stop()
+    return 0
+
+
+def worker_command(args: argparse.Namespace) -> int:
+    from service.core.config import Settings
+    from service.queue_worker import run_worker
+
+    return run_worker(Settings(), burst=args.burst, name=args.name)
+
+
+# ---- client side ---------------------------------------------------------------------------------------
+
+
+def _client(args: argparse.Namespace) -> Any:
+    from hgrender.client import HgrenderClient
+
+    token = args.token
+    token_file = args.data_dir / "admin.token"
+    if not token and token_file.exists():
+        token = token_file.read_text().strip()
+    return HgrenderClient(args.url, token=token)
+
+
+def _call(function: Any, *call_args: Any, **kwargs: Any) -> Any:
+    from hgrender.client import ApiError
+
+    try:
+        return function(*call_args, **kwargs)
+    except ApiError as error:
+        raise CliError(str(error)) from None
+
+
+def submit_command(args: argparse.Namespace) -> int:
+    if not args.scene.is_file():
+        raise CliError(f"scene: {args.scene} is not a file")
+    with _client(args) as client:
+        created = _call(
+            client.submit,
+            args.scene,
+            priority=args.priority,
+            spp=args.spp,
+            chunks=args.chunks,
+            seed=args.seed,
+            idempotency_key=args.idempotency_key,
+        )
+        print(created["id"])
+        if not args.wait:
+            return 0
+        final = _follow(client, created["id"])
+    print(json.dumps({k: final.get(k) for k in ("id", "status", "error")}))
+    return 0 if final["status"] == "succeeded" else 1
+
+
+def _follow(client: Any, job_id: str) -> dict[str, Any]:
+    """Wait for the job with a live tqdm bar fed by its SSE progress (polling if SSE is unavailable)."""
+    from tqdm import tqdm
+
+    with tqdm(total=1.0, unit="job", bar_format="{l_bar}{bar}| {n:.0%} [{elapsed}<{remaining}]") as bar:
+
+        def on_event(event: str, data: dict[str, Any]) -> None:
+            bar.n = float(data.get("progress", bar.n))
+            bar.set_postfix_str(
+                f"{data.get('status', 'running')} {data.get('chunks_done', '')}", refresh=False
+            )
+            bar.refresh()
+
+        return _call(client.wait, job_id, on_event=on_event)
+
+
+def status_command(args: argparse.Namespace) -> int:
+    with _client(args) as client:
+        print(json.dumps(_call(client.get, args.job_id), indent=2))
+    return 0
+
+
+def list_command(args: argparse.Namespace) -> int:
+    with _client(args) as client:
+        page = _call(client.list, status=args.status, limit=args.limit)
+    for job in page["items"]:
+        label = job.get("name") or ""
+        print(f"{job['id']}  {job['status']:<9}  {job['progress']:6.1%}  {job['owner']:<12} {label}")
+    print(f"{len(page['items'])} of {page['total']} jobs", file=sys.stderr)
+    return 0
+
+
+def cancel_command(args: argparse.Namespace) -> int:
+    with _client(args) as client:
+        print(_call(client.cancel, args.job_id)["status"])
+    return 0
+
+
+def download_command(args: argparse.Namespace) -> int:
+    out_dir = args.output if args.output is not None else Path(args.job_id)
+    with _client(args) as client:
+        for path in _call(client.download_all, args.job_id, out_dir):
+            print(path)
+    return 0
+
+
+def token_create_command(args: argparse.Namespace) -> int:
+    scopes = [s.strip() for s in args.scopes.split(",") if s.strip()]
+    with _client(args) as client:
+        created = _call(client.create_token, args.owner, scopes, args.name)
+    print(created["token"])
+    return 0

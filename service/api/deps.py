@@ -1,0 +1,92 @@
+"""Injected dependencies of the routes: settings, Redis, artifact store, job service, caller identity.
+
+Everything comes from ``app.state`` (set up once by ``service.main.create_app``); there are no module
+globals. ``require(scope)`` authenticates the bearer token, applies the per-token rate limit and checks
+the scope; with ``HGRENDER_AUTH=off`` every caller is the local developer with every scope.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Annotated
+
+import redis
+from fastapi import Depends, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+from service.auth import LOCAL_DEVELOPER, AuthenticationError, Principal, TokenRegistry
+from service.core.config import Settings
+from service.jobs import JobNotFoundError, JobService
+from service.models import JobView
+from service.store.base import ArtifactStore
+
+_bearer = HTTPBearer(
+    auto_error=False, description="API token (`hgrender token create`; `<data dir>/admin.token`)."
+)
+
+
+def get_settings(request: Request) -> Settings:
+    return request.app.state.settings
+
+
+def get_redis(request: Request) -> redis.Redis:
+    return request.app.state.redis
+
+
+def get_store(request: Request) -> ArtifactStore:
+    return request.app.state.store
+
+
+def get_jobs(request: Request) -> JobService:
+    return request.app.state.jobs
+
+
+def get_tokens(request: Request) -> TokenRegistry:
+    return request.app.state.tokens
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+RedisDep = Annotated[redis.Redis, Depends(get_redis)]
+StoreDep = Annotated[ArtifactStore, Depends(get_store)]
+JobsDep = Annotated[JobService, Depends(get_jobs)]
+TokensDep = Annotated[TokenRegistry, Depends(get_tokens)]
+
+
+def current_principal(
+    settings: SettingsDep,
+    tokens: TokensDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
+) -> Principal:
+    """The caller, authenticated and counted against its rate limit."""
+    if not settings.auth_enabled:
+        return LOCAL_DEVELOPER
+    if credentials is None or credentials.scheme.lower() != "bearer":
+        raise AuthenticationError("authorization: missing bearer token")
+    principal = tokens.authenticate(credentials.credentials)
+    tokens.check_rate_limit(principal, settings.rate_limit_per_minute)
+    return principal
+
+
+def require(scope: str) -> Callable[..., Principal]:
+    """A dependency that returns the caller if its token has ``scope`` (403 otherwise)."""
+
+    def dependency(principal: Annotated[Principal, Depends(current_principal)]) -> Principal:
+        principal.require(scope)
+        return principal
+
+    dependency.__name__ = f"require_{scope}"
+    return dependency
+
+
+Reader = Annotated[Principal, Depends(require("read"))]
+Submitter = Annotated[Principal, Depends(require("submit"))]
+Admin = Annotated[Principal, Depends(require("admin"))]
+
+
+def visible_job(jobs: JobService, principal: Principal, job_id: str) -> JobView:
+    """The job if it exists and the caller may see it; otherwise JobNotFoundError (404: other owners'
+    jobs are indistinguishable from missing ones)."""
+    view = jobs.get(job_id)
+    if view is None or not principal.can_see(view.owner):
+        raise JobNotFoundError(job_id)
+    return view

@@ -1,0 +1,229 @@
+"""``/v1/jobs``: submit, list, inspect, follow (SSE), cancel and delete render jobs; list and download
+their artifacts. Thin: the work happens in ``service.jobs`` and ``service.submissions``."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Path, Query, Request, Response, status
+from fastapi.responses import FileResponse, StreamingResponse
+from sse_starlette import EventSourceResponse
+from starlette.concurrency import run_in_threadpool
+from starlette.datastructures import UploadFile
+
+from schemas import SceneLimits
+from service.api.deps import JobsDep, Reader, StoreDep, Submitter, visible_job
+from service.events import job_events
+from service.jobs import JobNotFoundError, artifact_prefix
+from service.models import (
+    ArtifactList,
+    ArtifactView,
+    JobCreate,
+    JobCreated,
+    JobList,
+    JobOptions,
+    JobStatus,
+    JobView,
+    Problem,
+)
+from service.store.base import ArtifactNotFoundError, validate_key
+from service.store.filesystem import FilesystemStore
+from service.submissions import scene_from_json, scene_from_upload
+
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+
+JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="Job id (32 hex digits).")]
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {"model": Problem, "description": "Missing or invalid token."},
+    403: {"model": Problem, "description": "Token lacks the scope."},
+    404: {"model": Problem, "description": "No such job (or another owner's)."},
+    429: {"model": Problem, "description": "Rate limit exceeded."},
+}
+_MULTIPART_SCHEMA = {
+    "type": "object",
+    "required": ["scene"],
+    "properties": {
+        "scene": {"type": "string", "format": "binary", "description": ".json, .usda/.usdc/.usdz or .zip"},
+        "priority": {"type": "string", "enum": ["high", "normal", "low"]},
+        "spp": {"type": "integer", "minimum": 1},
+        "chunks": {"type": "integer", "minimum": 1},
+        "seed": {"type": "integer", "minimum": 0},
+        "idempotency_key": {"type": "string"},
+        "name": {"type": "string"},
+    },
+}
+
+
+async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str, bytes], JobOptions]:
+    """Body → (validated scene, bundle files, options); raises SceneError/ValidationError/ValueError."""
+    limits: SceneLimits = request.app.state.scene_limits
+    content_type = request.headers.get("content-type", "")
+    if content_type.startswith("multipart/form-data"):
+        form = await request.form(max_files=1, max_fields=16)
+        upload = form.get("scene")
+        if not isinstance(upload, UploadFile):
+            raise ValueError("scene: multipart requests need a file field 'scene'")
+        fields = {k: v for k, v in form.items() if k != "scene" and isinstance(v, str)}
+        options = JobOptions.model_validate(fields)  # lax mode: form strings → ints
+        content = await upload.read()
+        scene, files = await run_in_threadpool(
+            scene_from_upload, upload.filename or "", content, options, limits
+        )
+        return scene, files, options
+    if not content_type.startswith("application/json"):
+        raise ValueError("content-type: send application/json or multipart/form-data")
+    body = JobCreate.model_validate_json(await request.body())
+    options = JobOptions.model_validate(body.model_dump(exclude={"scene"}))
+    scene = await run_in_threadpool(scene_from_json, body.scene, options, limits)
+    return scene, {}, options
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=JobCreated,
+    summary="Submit a render job",
+    responses={
+        **_ERRORS,
+        200: {"model": JobCreated, "description": "An earlier job with the same idempotency_key."},
+        413: {"model": Problem, "description": "Body too large."},
+        422: {"model": Problem, "description": "Invalid request or scene; `errors` lists JSON pointers."},
+    },
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "content": {
+                "application/json": {"schema": {"$ref": "#/components/schemas/JobCreate"}},
+                "multipart/form-data": {"schema": _MULTIPART_SCHEMA},
+            },
+        }
+    },
+)
+async def submit_job(request: Request, response: Response, jobs: JobsDep, principal: Submitter) -> JobCreated:
+    """Validate the scene (JSON body `{"scene": ...}` or a multipart file `scene`), store it, split it
+    into chunks and enqueue them with a dependent merge step. Invalid input is rejected before anything
+    is stored or enqueued."""
+    scene, files, options = await _parse_submission(request)
+    view, created = await run_in_threadpool(
+        lambda: jobs.create(
+            scene,
+            principal.owner,
+            priority=options.priority,
+            chunks=options.chunks,
+            idempotency_key=options.idempotency_key,
+            name=options.name or scene.get("name"),
+            extra_files=files,
+        )
+    )
+    if not created:
+        response.status_code = status.HTTP_200_OK
+    return JobCreated(id=view.id, status=view.status)
+
+
+@router.get("", response_model=JobList, summary="List jobs", responses=_ERRORS)
+def list_jobs(
+    jobs: JobsDep,
+    principal: Reader,
+    status_filter: Annotated[JobStatus | None, Query(alias="status")] = None,
+    offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
+    limit: Annotated[int, Query(ge=1, le=200)] = 50,
+) -> JobList:
+    """Newest first; your own jobs (all jobs for admins), optionally of one status."""
+    owner = None if principal.is_admin else principal.owner
+    items, total = jobs.list(owner, status_filter, offset, limit)
+    return JobList(items=items, total=total, offset=offset, limit=limit)
+
+
+@router.get("/{job_id}", response_model=JobView, summary="Job status and progress", responses=_ERRORS)
+def get_job(job_id: JobId, jobs: JobsDep, principal: Reader) -> JobView:
+    return visible_job(jobs, principal, job_id)
+
+
+@router.post(
+    "/{job_id}/cancel",
+    response_model=JobView,
+    summary="Cancel a job",
+    responses={**_ERRORS, 409: {"model": Problem, "description": "Job already finished."}},
+)
+def cancel_job(job_id: JobId, jobs: JobsDep, principal: Submitter) -> JobView:
+    """Queued chunks are dropped, running ones stop within seconds; the job reads `canceled`."""
+    visible_job(jobs, principal, job_id)
+    return jobs.cancel(job_id)
+
+
+@router.delete(
+    "/{job_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Delete a job and its artifacts",
+    responses=_ERRORS,
+)
+def delete_job(job_id: JobId, jobs: JobsDep, principal: Submitter) -> Response:
+    visible_job(jobs, principal, job_id)
+    jobs.delete(job_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.get(
+    "/{job_id}/events",
+    summary="Follow a job (Server-Sent Events)",
+    responses={
+        **_ERRORS,
+        200: {"content": {"text/event-stream": {}}, "description": "status/progress events"},
+    },
+)
+async def job_event_stream(
+    request: Request, job_id: JobId, jobs: JobsDep, principal: Reader
+) -> EventSourceResponse:
+    """`status` events carry the full job view (first one immediately); `progress` events carry
+    `progress`, `chunks_done`, `chunks_total`, `eta_s`. The stream ends after a final status."""
+    await run_in_threadpool(visible_job, jobs, principal, job_id)
+    return EventSourceResponse(job_events(request, request.app.state.aredis, jobs, job_id), ping=15)
+
+
+@router.get("/{job_id}/artifacts", response_model=ArtifactList, summary="List artifacts", responses=_ERRORS)
+def list_artifacts(job_id: JobId, jobs: JobsDep, store: StoreDep, principal: Reader) -> ArtifactList:
+    """Final artifacts (image.exr, preview.png, summary.json, worker.log, manifest.json, ...) and the
+    job's inputs and chunk partials, with sizes and download URLs."""
+    visible_job(jobs, principal, job_id)
+    prefix = artifact_prefix(job_id)
+    items = [
+        ArtifactView(
+            name=(name := info.key.removeprefix(prefix)),
+            size_bytes=info.size_bytes,
+            url=f"/v1/jobs/{job_id}/artifacts/{name}",
+        )
+        for info in store.list(prefix)
+    ]
+    return ArtifactList(job_id=job_id, items=items)
+
+
+_MEDIA_TYPES = {".exr": "image/x-exr", ".png": "image/png", ".json": "application/json", ".log": "text/plain"}
+
+
+@router.get(
+    "/{job_id}/artifacts/{name:path}",
+    summary="Download an artifact",
+    responses={**_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "The file."}},
+)
+def download_artifact(
+    job_id: JobId, name: str, jobs: JobsDep, store: StoreDep, principal: Reader
+) -> Response:
+    visible_job(jobs, principal, job_id)
+    try:
+        key = validate_key(artifact_prefix(job_id) + name)
+    except ValueError:
+        raise JobNotFoundError(f"{job_id}/{name}") from None
+    media_type = _MEDIA_TYPES.get("." + name.rsplit(".", 1)[-1].lower(), "application/octet-stream")
+    if isinstance(store, FilesystemStore):
+        path = store.path_for(key)
+        if not path.is_file():
+            raise ArtifactNotFoundError(name)
+        return FileResponse(path, media_type=media_type, filename=path.name)
+    pieces = store.iter_bytes(key)
+    first = next(pieces, b"")  # raises ArtifactNotFoundError before the response starts
+
+    def body() -> Any:
+        yield first
+        yield from pieces
+
+    return StreamingResponse(body(), media_type=media_type)

@@ -1,0 +1,109 @@
+"""Service configuration: one pydantic-settings class read from ``HGRENDER_*`` environment variables.
+
+Every field is documented in ``docs/configuration.md`` (one table). ``REDIS_URL`` is read without the prefix
+(the usual name in container deployments); when it is unset, ``hgrender serve`` starts a private Redis.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Literal
+
+from pydantic import AliasChoices, Field, field_validator, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+QUEUE_NAMES: tuple[str, ...] = ("high", "default", "low")
+"""RQ queues in dequeue order; a job's ``priority`` picks one."""
+
+
+class Settings(BaseSettings):
+    """All knobs of the API, the queue workers and the artifact store."""
+
+    model_config = SettingsConfigDict(env_prefix="HGRENDER_", extra="ignore", validate_default=True)
+
+    data_dir: Path = Field(
+        Path("./data"), description="Root for the embedded Redis, artifacts and admin token."
+    )
+    redis_url: str | None = Field(
+        None,
+        validation_alias=AliasChoices("REDIS_URL", "HGRENDER_REDIS_URL"),
+        description="Redis to use; unset means `hgrender serve` starts a private redis-server.",
+    )
+    auth: Literal["on", "off"] = Field("on", description="`off` disables bearer tokens (local development).")
+    store: Literal["filesystem", "s3"] = Field("filesystem", description="Artifact store backend.")
+    store_dir: Path | None = Field(None, description="Filesystem store root; default `<data_dir>/artifacts`.")
+    s3_bucket: str | None = Field(None, description="S3 bucket for the `s3` store.")
+    s3_prefix: str = Field("", description="Key prefix inside the S3 bucket.")
+    s3_endpoint_url: str | None = Field(None, description="S3-compatible endpoint (MinIO, moto, ...).")
+    s3_region: str = Field("us-east-1", description="S3 region name.")
+    max_request_bytes: int = Field(64 * 1024 * 1024, gt=0, description="Largest accepted request body.")
+    default_chunks: int = Field(2, ge=1, description="Chunks per job when the request names none.")
+    max_chunks: int = Field(64, ge=1, description="Largest accepted `chunks` in a request.")
+    job_timeout_s: int = Field(3600, gt=0, description="Wall-clock limit of one chunk or merge step.")
+    chunk_retry_max: int = Field(3, ge=0, description="Retries of a chunk whose worker failed or died.")
+    chunk_retry_intervals_s: list[int] = Field(
+        default_factory=lambda: [2, 10, 30], description="Backoff before retries 1, 2, 3 (s)."
+    )
+    result_ttl_s: int = Field(7 * 24 * 3600, gt=0, description="How long RQ keeps finished chunk results.")
+    workers: int | None = Field(
+        None, ge=0, description="Queue workers started by `hgrender serve`; default max(1, cores // 2)."
+    )
+    worker_monitoring_interval_s: int = Field(
+        10, ge=1, description="How often a worker heartbeats while its work horse renders."
+    )
+    worker_heartbeat_grace_s: int = Field(
+        60, ge=1, description="Seconds without heartbeat after which a running chunk counts as abandoned."
+    )
+    worker_maintenance_interval_s: int = Field(
+        60, ge=1, description="How often workers look for abandoned chunks of dead workers."
+    )
+    worker_ttl_s: int = Field(
+        420, ge=5, description="Lifetime of an idle worker's registration between beats."
+    )
+    rate_limit_per_minute: int = Field(6000, ge=1, description="Requests per token per minute (429 above).")
+    idempotency_ttl_s: int = Field(
+        24 * 3600, gt=0, description="How long an `idempotency_key` is remembered."
+    )
+    progress_interval_s: float = Field(0.25, gt=0, description="Least interval between progress events.")
+
+    @field_validator("chunk_retry_intervals_s")
+    @classmethod
+    def _intervals_non_negative(cls, value: list[int]) -> list[int]:
+        if any(v < 0 for v in value):
+            raise ValueError("chunk_retry_intervals_s: intervals must be >= 0 seconds")
+        return value
+
+    @model_validator(mode="after")
+    def _s3_needs_bucket(self) -> Settings:
+        if self.store == "s3" and not self.s3_bucket:
+            raise ValueError("s3_bucket: required when store is 's3'")
+        return self
+
+    def to_env(self) -> dict[str, str]:
+        """These settings as environment variables (for child processes such as workers)."""
+        env = {}
+        for name, value in self.model_dump(mode="json").items():
+            if value is None:
+                continue
+            key = "REDIS_URL" if name == "redis_url" else f"HGRENDER_{name.upper()}"
+            env[key] = json.dumps(value) if isinstance(value, list) else str(value)
+        return env
+
+    @property
+    def artifact_dir(self) -> Path:
+        """Filesystem store root."""
+        return self.store_dir if self.store_dir is not None else self.data_dir / "artifacts"
+
+    @property
+    def auth_enabled(self) -> bool:
+        return self.auth == "on"
+
+    @property
+    def worker_count(self) -> int:
+        """Workers for ``hgrender serve``: one per two cores, because a render's LLVM kernels are
+        multi-threaded and already use more than one core each."""
+        if self.workers is not None:
+            return self.workers
+        return max(1, (os.cpu_count() or 1) // 2)

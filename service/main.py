@@ -1,0 +1,83 @@
+"""The FastAPI application: ``create_app(settings)`` wires settings, Redis, the artifact store, the job
+service, middleware, exception handlers and the routers. Never imports Mitsuba or Dr.Jit.
+
+Run it with ``hgrender serve`` (which also starts workers and, without ``REDIS_URL``, a private Redis) or
+any ASGI server: ``uvicorn --factory service.main:app_from_env``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+import redis
+import redis.asyncio as aioredis
+from fastapi import FastAPI
+
+from hgrender import __version__
+from schemas import SceneLimits
+from service.api.errors import install_exception_handlers
+from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware
+from service.api.routes import coherence, health, jobs, schemas, tokens
+from service.auth import TokenRegistry
+from service.core.config import Settings
+from service.jobs import JobService
+from service.metrics import LatencyHistogram
+from service.store import store_from_settings
+
+DESCRIPTION = """Render partially-coherent light in Hermite-Gauss space (Steinberg & Yan 2021).
+
+Submit a scene (`POST /v1/jobs`), follow it (`GET /v1/jobs/{id}` or the SSE stream `/events`), and
+download its spectral EXR, coherence diagnostics, preview and summary (`/artifacts`). Authenticate with
+`Authorization: Bearer <token>`; `hgrender serve` writes a first admin token to `<data dir>/admin.token`.
+"""
+
+
+def create_app(settings: Settings) -> FastAPI:
+    """The API for ``settings``; ``settings.redis_url`` must name a running Redis."""
+    if not settings.redis_url:
+        raise ValueError("redis_url: REDIS_URL must be set (hgrender serve starts a private Redis)")
+    latency = LatencyHistogram()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        yield
+        await app.state.aredis.aclose()
+        app.state.redis.close()
+
+    app = FastAPI(
+        title="hgrender",
+        version=__version__,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        openapi_tags=[
+            {"name": "jobs", "description": "Render jobs and their artifacts."},
+            {"name": "coherence", "description": "Coherence calculator."},
+            {"name": "schemas", "description": "Scene schema."},
+            {"name": "tokens", "description": "API tokens (admin)."},
+            {"name": "health", "description": "Liveness, readiness, metrics."},
+        ],
+    )
+    client = redis.Redis.from_url(settings.redis_url, health_check_interval=30)
+    store = store_from_settings(settings)
+    app.state.settings = settings
+    app.state.redis = client
+    app.state.aredis = aioredis.Redis.from_url(settings.redis_url)
+    app.state.store = store
+    app.state.jobs = JobService(client, store, settings)
+    app.state.tokens = TokenRegistry(client)
+    app.state.scene_limits = SceneLimits()
+    app.state.latency = latency
+
+    install_exception_handlers(app)
+    for router in (jobs.router, coherence.router, schemas.router, tokens.router, health.router):
+        app.include_router(router)
+    # The last added is outermost: latency also times the 413s the size limit answers before routing.
+    app.add_middleware(BodySizeLimitMiddleware, max_bytes=settings.max_request_bytes)
+    app.add_middleware(LatencyMiddleware, histogram=latency)
+    return app
+
+
+def app_from_env() -> FastAPI:
+    """``create_app(Settings())``, for ASGI servers' ``--factory`` option."""
+    return create_app(Settings())

@@ -1,0 +1,99 @@
+"""A private ``redis-server`` subprocess for the embedded deployment (``hgrender serve`` without REDIS_URL).
+
+Persistence is on (append-only file, fsync every second, plus RDB snapshots) under ``<data_dir>/redis`` so
+job records and queued chunks survive a restart. The server listens on loopback only, on a free port
+chosen at start, and the start returns once the server answers PING.
+"""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import redis
+
+
+def free_loopback_port() -> int:
+    """A TCP port on 127.0.0.1 that is free right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+class RedisServer:
+    """One ``redis-server`` process with its data in ``data_dir``; ``start()``/``stop()`` or a ``with``."""
+
+    def __init__(self, data_dir: Path, port: int | None = None, executable: str = "redis-server") -> None:
+        self.data_dir = Path(data_dir)
+        self.port = port if port is not None else free_loopback_port()
+        self.executable = executable
+        self.process: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"redis://127.0.0.1:{self.port}/0"
+
+    def command(self) -> list[str]:
+        """The command line: loopback only, AOF on, data and log under ``data_dir``."""
+        binary = shutil.which(self.executable)
+        if binary is None:
+            raise ValueError(
+                f"executable: {self.executable!r} not found on PATH (Debian: apt install redis-server)"
+            )
+        return [
+            binary,
+            "--bind", "127.0.0.1",
+            "--port", str(self.port),
+            "--dir", str(self.data_dir.resolve()),
+            "--appendonly", "yes",
+            "--appendfsync", "everysec",
+            "--save", "60 1",
+            "--daemonize", "no",
+            "--protected-mode", "yes",
+            "--logfile", str((self.data_dir / "redis.log").resolve()),
+        ]  # fmt: skip
+
+    def start(self, timeout_s: float = 10.0) -> RedisServer:
+        """Start the server and wait until it answers PING; raises RuntimeError if it does not."""
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.process = subprocess.Popen(self.command(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + timeout_s
+        client = redis.Redis.from_url(self.url, socket_connect_timeout=0.5)
+        try:
+            while time.monotonic() < deadline:
+                if self.process.poll() is not None:
+                    stderr = (
+                        self.process.stderr.read().decode(errors="replace") if self.process.stderr else ""
+                    )
+                    raise RuntimeError(
+                        f"redis-server exited with {self.process.returncode}: {stderr.strip()}"
+                    )
+                try:
+                    if client.ping():
+                        return self
+                except redis.exceptions.RedisError:
+                    time.sleep(0.05)
+        finally:
+            client.close()
+        self.stop()
+        raise RuntimeError(f"redis-server did not answer PING on port {self.port} within {timeout_s} s")
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """SIGTERM (Redis flushes the AOF and exits), then SIGKILL if it hangs."""
+        if self.process is None or self.process.poll() is not None:
+            return
+        self.process.terminate()
+        try:
+            self.process.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+
+    def __enter__(self) -> RedisServer:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()

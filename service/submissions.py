@@ -1,0 +1,66 @@
+"""Turning a job request into a validated scene document: JSON bodies, uploaded JSON files, USD files.
+
+The request's ``spp`` and ``seed`` override the scene's ``film.spp`` / ``film.seed`` and the result is
+validated again, so the deployment's scene limits (``schemas.limits.SceneLimits``) apply to the values
+that will actually be rendered. Invalid input raises ``schemas.SceneError`` (JSON pointers into the scene)
+or ValueError; nothing is written or enqueued before this succeeds.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from schemas import SceneError, SceneLimits, validate_scene, validate_scene_json
+from service.models import JobOptions
+
+USD_SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd", ".usdz", ".zip")
+
+
+def apply_overrides(scene_json: dict[str, Any], options: JobOptions, limits: SceneLimits) -> dict[str, Any]:
+    """The validated scene with the request's spp/seed written into its film, validated again."""
+    if options.spp is None and options.seed is None:
+        return scene_json
+    film = dict(scene_json.get("film", {}))
+    if options.spp is not None:
+        film["spp"] = options.spp
+    if options.seed is not None:
+        film["seed"] = options.seed
+    return validate_scene({**scene_json, "film": film}, limits).to_json_dict()
+
+
+def scene_from_json(data: Any, options: JobOptions, limits: SceneLimits) -> dict[str, Any]:
+    """A JSON scene (already parsed) → validated scene document."""
+    return apply_overrides(validate_scene(data, limits).to_json_dict(), options, limits)
+
+
+def scene_from_upload(
+    filename: str, content: bytes, options: JobOptions, limits: SceneLimits
+) -> tuple[dict[str, Any], dict[str, bytes]]:
+    """An uploaded scene file → (validated scene document, bundle files to store beside it).
+
+    ``.json`` is parsed as a scene; USD layers and bundles (``.usda/.usdc/.usd/.usdz/.zip``) go through
+    the isolated USD importer (a separate process with memory and time limits).
+    """
+    name = Path(filename or "").name
+    suffix = Path(name).suffix.lower()
+    if suffix == ".json":
+        scene = validate_scene_json(content, limits).to_json_dict()
+        return apply_overrides(scene, options, limits), {}
+    if suffix not in USD_SUFFIXES:
+        raise SceneError.at("", f"scene file {name!r}: expected .json or one of {', '.join(USD_SUFFIXES)}")
+    from schemas.usd_import import import_usd_isolated
+
+    with tempfile.TemporaryDirectory(prefix="hgrender-upload-") as tmp:
+        upload_path = Path(tmp) / f"scene{suffix}"
+        upload_path.write_bytes(content)
+        bundle_dir = Path(tmp) / "bundle"
+        bundle_dir.mkdir()
+        scene = import_usd_isolated(upload_path, bundle_dir, limits, limits.usd_timeout_s)
+        files = {
+            path.relative_to(bundle_dir).as_posix(): path.read_bytes()
+            for path in sorted(bundle_dir.rglob("*"))
+            if path.is_file()
+        }
+    return apply_overrides(scene.to_json_dict(), options, limits), files

@@ -1,0 +1,214 @@
+"""API contract without workers: auth and owner visibility, limits, validation, listing, idempotency,
+tokens, health, metrics, schema and coherence endpoints — over HTTP against a live server and real Redis.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import time
+
+import httpx
+import pytest
+
+from service.auth import TokenRegistry
+from tests.service.conftest import REPO_ROOT, LiveService, http_get, tiny_scene
+
+
+def test_service_never_imports_mitsuba_or_drjit() -> None:
+    code = (
+        "import sys, service.main, service.jobs, service.queue_worker, hgrender.client; "
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('mitsuba', 'drjit')]; "
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    result = subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_missing_and_invalid_tokens_are_401(live_service: LiveService) -> None:
+    assert http_get(live_service, "/v1/jobs").status_code == 401
+    response = http_get(live_service, "/v1/jobs", token="hgr_not-a-real-token")
+    assert response.status_code == 401
+    assert response.json()["detail"].startswith("authorization:")
+    assert response.headers["www-authenticate"] == "Bearer"
+    assert http_get(live_service, "/v1/jobs", token="garbage").status_code == 401
+
+
+def test_owner_visibility_and_scopes(live_service: LiveService) -> None:
+    alice = live_service.client(live_service.token("alice"))
+    bob = live_service.client(live_service.token("bob"))
+    reader = live_service.client(live_service.token("carol", ("read",)))
+    job = alice.submit(tiny_scene(), chunks=1)
+    assert alice.get(job["id"])["owner"] == "alice"
+    # Bob can neither see nor cancel nor delete nor download Alice's job: indistinguishable from missing.
+    for call in (
+        lambda: bob.get(job["id"]),
+        lambda: bob.cancel(job["id"]),
+        lambda: bob.delete(job["id"]),
+        lambda: bob.artifacts(job["id"]),
+    ):
+        with pytest.raises(Exception) as error:
+            call()
+        assert getattr(error.value, "status_code", None) == 404
+    assert job["id"] not in [j["id"] for j in bob.list()["items"]]
+    # Admins see everyone's jobs; a read-only token cannot submit.
+    assert job["id"] in [j["id"] for j in live_service.client().list()["items"]]
+    with pytest.raises(Exception) as error:
+        reader.submit(tiny_scene())
+    assert getattr(error.value, "status_code", None) == 403
+    # Cancel of a queued job is immediate and final; a second cancel is idempotent.
+    assert alice.cancel(job["id"])["status"] == "canceled"
+    assert alice.cancel(job["id"])["status"] == "canceled"
+
+
+def test_oversize_body_is_413_and_nothing_is_enqueued(live_service: LiveService) -> None:
+    token = live_service.token("big")
+    queued_before = live_service.redis.llen("rq:queue:default")
+    padding = "x" * (live_service.settings.max_request_bytes + 10)
+    response = httpx.post(
+        live_service.base_url + "/v1/jobs",
+        json={"scene": tiny_scene(), "name": padding},
+        headers={"Authorization": f"Bearer {token}"},
+        timeout=30,
+    )
+    assert response.status_code == 413
+    assert response.json()["detail"].startswith("body:")
+    # Chunked upload without Content-Length is counted too.
+    body = (b'{"scene": {}, "name": "' + padding.encode() + b'"}' for _ in range(1))
+    response = httpx.post(
+        live_service.base_url + "/v1/jobs",
+        content=body,
+        headers={"Authorization": f"Bearer {token}", "Content-Type": "application/json"},
+        timeout=30,
+    )
+    assert response.status_code == 413
+    assert live_service.redis.llen("rq:queue:default") == queued_before
+
+
+def test_malformed_scene_is_422_naming_the_field_and_nothing_is_written(live_service: LiveService) -> None:
+    client = live_service.client(live_service.token("dave"))
+    store_root = live_service.settings.artifact_dir
+    before = sorted(store_root.rglob("*")) if store_root.exists() else []
+    scene = tiny_scene()
+    scene["film"]["spp"] = 0
+    response = client.http.post("/v1/jobs", json={"scene": scene})
+    assert response.status_code == 422
+    body = response.json()
+    assert body["detail"].startswith("scene: /film/spp:")
+    assert {"pointer": "/film/spp"}.items() <= body["errors"][0].items()
+    # Request fields are named too.
+    response = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "priority": "urgent"})
+    assert response.status_code == 422 and response.json()["detail"].startswith("priority:")
+    response = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "chunks": 10_000})
+    assert response.status_code == 422 and response.json()["detail"].startswith("chunks:")
+    response = client.http.post(
+        "/v1/jobs", content=b"{not json", headers={"Content-Type": "application/json"}
+    )
+    assert response.status_code == 422
+    after = sorted(store_root.rglob("*")) if store_root.exists() else []
+    assert after == before
+    assert client.list()["total"] == 0
+
+
+def test_spp_override_is_validated_against_scene_limits(live_service: LiveService) -> None:
+    client = live_service.client(live_service.token("erin"))
+    response = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "spp": 10_000_000})
+    assert response.status_code == 422
+    assert response.json()["detail"].startswith("spp:") or "/film/spp" in response.json()["detail"]
+    job = client.submit(tiny_scene(spp=4), spp=3, chunks=8)
+    view = client.get(job["id"])
+    # 8 chunks requested but only 3 samples per pixel: one sample per chunk at least.
+    assert (view["spp"], view["chunks_total"], view["status"]) == (3, 3, "queued")
+    assert live_service.redis.exists(f"rq:job:{job['id']}-chunk-2", f"rq:job:{job['id']}-merge") == 2
+
+
+def test_idempotency_key_returns_the_first_job(live_service: LiveService) -> None:
+    client = live_service.client(live_service.token("frank"))
+    first = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "idempotency_key": "nightly-1"})
+    second = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "idempotency_key": "nightly-1"})
+    assert (first.status_code, second.status_code) == (202, 200)
+    assert first.json()["id"] == second.json()["id"]
+
+
+def test_listing_filters_and_paginates(live_service: LiveService) -> None:
+    client = live_service.client(live_service.token("gina"))
+    ids = [client.submit(tiny_scene(), chunks=1)["id"] for _ in range(5)]
+    client.cancel(ids[0])
+    page = client.list(limit=2)
+    assert page["total"] == 5 and [j["id"] for j in page["items"]] == ids[::-1][:2]
+    page = client.list(limit=2, offset=4)
+    assert [j["id"] for j in page["items"]] == [ids[0]]
+    assert [j["id"] for j in client.list(status="canceled")["items"]] == [ids[0]]
+    assert client.list(status="queued")["total"] == 4
+    # Delete removes record and artifacts.
+    client.delete(ids[1])
+    assert client.list()["total"] == 4
+    assert not (live_service.settings.artifact_dir / "jobs" / ids[1]).exists()
+
+
+def test_tokens_are_stored_hashed_and_managed_by_admins(live_service: LiveService) -> None:
+    admin = live_service.client()
+    created = admin.create_token("harry", ["read"], "ci")
+    assert created["token"].startswith("hgr_") and created["scopes"] == ["read"]
+    raw_values = [
+        value
+        for key in live_service.redis.scan_iter("hgrender:token:*")
+        for value in live_service.redis.hgetall(key).values()
+    ]
+    assert created["token"].encode() not in raw_values  # only the SHA-256 is kept
+    harry = live_service.client(created["token"])
+    assert harry.list()["total"] == 0
+    with pytest.raises(Exception) as error:
+        harry.create_token("x", ["admin"])
+    assert getattr(error.value, "status_code", None) == 403
+    assert admin.http.delete(f"/v1/tokens/{created['id']}").status_code == 204
+    assert http_get(live_service, "/v1/jobs", token=created["token"]).status_code == 401
+
+
+def test_rate_limit_answers_429(live_service: LiveService) -> None:
+    registry = TokenRegistry(live_service.redis)
+    secret, info = registry.create("ivan", ("read",))
+    limit = live_service.settings.rate_limit_per_minute
+    # Pre-fill this minute's counter to just below the limit; the limit is then hit within two requests.
+    window = int(time.time() // 60)
+    live_service.redis.set(f"hgrender:ratelimit:{info.id}:{window}", limit - 1, ex=120)
+    live_service.redis.set(f"hgrender:ratelimit:{info.id}:{window + 1}", limit - 1, ex=180)
+    statuses = [http_get(live_service, "/v1/jobs", token=secret).status_code for _ in range(2)]
+    assert statuses == [200, 429]
+    response = http_get(live_service, "/v1/jobs", token=secret)
+    assert response.status_code == 429 and int(response.headers["retry-after"]) >= 1
+
+
+def test_health_readiness_metrics_schema(live_service: LiveService) -> None:
+    assert http_get(live_service, "/healthz").json() == {"status": "ok"}
+    ready = http_get(live_service, "/readyz").json()
+    assert ready == {"status": "ok", "checks": {"redis": "ok", "store": "ok"}}
+    metrics = http_get(live_service, "/metrics").text
+    assert 'hgrender_queue_depth{queue="default"}' in metrics
+    assert 'hgrender_jobs{status="queued"}' in metrics
+    assert "hgrender_api_request_duration_seconds_bucket" in metrics
+    schema = http_get(live_service, "/v1/schemas/scene", token=live_service.admin_token).json()
+    assert "properties" in schema or "$defs" in schema
+    spec = http_get(live_service, "/openapi.json").json()
+    assert {"/v1/jobs", "/v1/jobs/{job_id}/events", "/v1/coherence", "/metrics"} <= set(spec["paths"])
+
+
+def test_metrics_jobs_by_state_match_listing(live_service: LiveService) -> None:
+    client = live_service.client()
+    by_status = {s: client.list(status=s)["total"] for s in ("queued", "canceled")}
+    metrics = http_get(live_service, "/metrics").text
+    for status, count in by_status.items():
+        assert f'hgrender_jobs{{status="{status}"}} {count}' in metrics
+
+
+def test_coherence_endpoint_matches_van_cittert_zernike(live_service: LiveService) -> None:
+    """A uniform disk of radius a seen from r has |μ| curvature of 2J1(v)/v: Σ⊥ = a²/4 per axis, so
+    ℓ = 1/sqrt((k/r)² a²/4) = 2r/(k a) (the calculator's own closed form; relative tolerance 1e-9)."""
+    client = live_service.client()
+    result = client.coherence(source="disk", radius_m=0.01, distance_m=2.0, wavelength_nm=550.0)
+    k = 2 * math.pi / 550e-9
+    expected_um = 2 * 2.0 / (k * 0.01) * 1e6
+    assert result["l1_um"] == pytest.approx(expected_um, rel=1e-9)
+    response = client.http.post("/v1/coherence", json={"source": "disk", "radius_m": -1, "distance_m": 1})
+    assert response.status_code == 422 and response.json()["detail"].startswith("radius_m")

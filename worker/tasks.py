@@ -1,0 +1,208 @@
+"""RQ job functions: render one chunk of a job, and merge a job's chunks into its final artifacts.
+
+They run in RQ's forked work horse (``service.queue_worker``), so the renderer (Mitsuba, Dr.Jit) is
+imported here and never in the API process. A chunk renders spp partition ``i`` of
+``worker.render.api.plan_chunks(spp, K, seed)`` and uploads ``jobs/<id>/chunks/<i>.npz`` to the artifact
+store; a retried chunk uploads to the same key, so a retry never leaves a duplicate. The merge step runs
+after every chunk ended (success or failure) and writes ``image.exr``, ``preview.png``,
+``summary.json`` (and whatever else ``merge_chunks`` produces), ``worker.log`` and ``manifest.json``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from rq import get_current_job
+from rq.exceptions import NoSuchJobError
+from rq.job import Job as RQJob
+from rq.job import JobStatus as RQJobStatus
+
+from service.core.config import Settings
+from service.jobs import JobService, chunk_key, chunk_rq_id, scene_key
+from service.models import TERMINAL_STATUSES, JobStatus
+from service.store import store_from_settings
+
+CANCEL_POLL_INTERVAL_S = 0.5
+"""How often a running chunk re-reads its job's status (a cancel stops it within this plus one pass)."""
+
+
+def _context() -> tuple[JobService, RQJob]:
+    rq_job = get_current_job()
+    if rq_job is None:
+        raise RuntimeError("worker.tasks functions run inside an RQ work horse (hgrender worker)")
+    settings = Settings()
+    return JobService(rq_job.connection, store_from_settings(settings), settings), rq_job
+
+
+class _ProgressReporter:
+    """Forwards a chunk's progress to Redis, at most once per ``interval_s``."""
+
+    def __init__(self, jobs: JobService, job_id: str, index: int, interval_s: float) -> None:
+        self.jobs, self.job_id, self.index, self.interval_s = jobs, job_id, index, interval_s
+        self._last_s = 0.0
+
+    def __call__(self, fraction: float) -> None:
+        now = time.monotonic()
+        if now - self._last_s >= self.interval_s:
+            self._last_s = now
+            self.jobs.chunk_progress(self.job_id, self.index, fraction)
+
+
+class _CancelPoll:
+    """``should_stop`` for the renderer: True once the job was canceled or deleted."""
+
+    def __init__(self, jobs: JobService, job_id: str) -> None:
+        self.jobs, self.job_id = jobs, job_id
+        self._last_s = 0.0
+        self._stop = False
+
+    def __call__(self, force: bool = False) -> bool:
+        now = time.monotonic()
+        if not self._stop and (force or now - self._last_s >= CANCEL_POLL_INTERVAL_S):
+            self._last_s = now
+            self._stop = self.jobs.status(self.job_id) in {JobStatus.CANCELED, None}
+        return self._stop
+
+
+def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> dict[str, Any]:
+    """The job's scene, with the files of an uploaded bundle copied under ``work_dir`` (the render's cwd,
+    against which the scene's relative file paths resolve)."""
+    input_prefix = f"jobs/{job_id}/input/"
+    for info in jobs.store.list(input_prefix):
+        jobs.store.get_file(info.key, work_dir / info.key[len(input_prefix) :])
+    return json.loads(jobs.store.get_bytes(scene_key(job_id)))
+
+
+def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
+    """Render chunk ``chunk_index`` of job ``job_id`` and upload its partial buffers."""
+    jobs, rq_job = _context()
+    record = jobs.record(job_id)
+    if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
+        return {"skipped": record.get("status", "deleted")}
+    from worker.render.api import plan_chunks, render_chunk
+
+    chunk = plan_chunks(int(record["spp"]), int(record["chunks"]), int(record["seed"]))[chunk_index]
+    jobs.chunk_started(job_id, chunk_index, rq_job.worker_name or "", chunk.spp)
+    should_stop = _CancelPoll(jobs, job_id)
+    with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-{chunk_index}-") as tmp:
+        work_dir = Path(tmp)
+        scene = _load_inputs(jobs, job_id, work_dir)
+        out_path = work_dir / f"chunk-{chunk_index}.npz"
+        os.chdir(work_dir)  # the horse is a forked process of its own; relative scene paths resolve here
+        result = render_chunk(
+            scene,
+            chunk,
+            out_path,
+            progress=_ProgressReporter(jobs, job_id, chunk_index, jobs.settings.progress_interval_s),
+            should_stop=should_stop,
+        )
+        if should_stop(force=True):
+            jobs.set_chunk_status(job_id, chunk_index, "canceled")
+            return {"canceled": True}
+        jobs.store.put_file(chunk_key(job_id, chunk_index), out_path)
+    jobs.chunk_finished(job_id, chunk_index, int(result["samples"]), float(result["seconds"]))
+    return {"samples": int(result["samples"]), "seconds": float(result["seconds"])}
+
+
+def _chunk_failures(jobs: JobService, job_id: str, chunk_count: int) -> list[str]:
+    """One line per chunk that did not finish: its index and last error."""
+    failures = []
+    for index in range(chunk_count):
+        try:
+            rq_job = RQJob.fetch(chunk_rq_id(job_id, index), connection=jobs.client)
+        except NoSuchJobError:
+            failures.append(f"chunk {index}: lost from the queue")
+            continue
+        if rq_job.get_status() != RQJobStatus.FINISHED:
+            result = rq_job.latest_result()
+            reason = (result.exc_string or "").strip().splitlines()[-1:] if result else []
+            failures.append(f"chunk {index}: {reason[0] if reason else rq_job.get_status()}")
+    return failures
+
+
+def _worker_log(jobs: JobService, job_id: str) -> bytes:
+    """A plain-text log of who rendered what, in how many attempts and how long."""
+    view = jobs.get(job_id)
+    assert view is not None
+    lines = [f"job {job_id} owner={view.owner} spp={view.spp} seed={view.seed} chunks={view.chunks_total}"]
+    lines += [
+        f"chunk {c.index}: status={c.status} worker={c.worker} attempts={c.attempts} spp={c.spp} "
+        f"samples={c.samples} seconds={c.seconds}"
+        for c in view.chunks
+    ]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def _write_manifest(jobs: JobService, job_id: str, overrides: dict[str, Any]) -> None:
+    """``manifest.json``: the job's final view and every artifact's size and SHA-256, so results outlive
+    the loss of Redis (``JobService.get`` falls back to it)."""
+    view = jobs.get(job_id)
+    assert view is not None
+    job = view.model_dump(mode="json") | overrides
+    artifacts = [
+        {
+            "name": info.key.removeprefix(f"jobs/{job_id}/"),
+            "size_bytes": info.size_bytes,
+            "sha256": hashlib.sha256(jobs.store.get_bytes(info.key)).hexdigest(),
+        }
+        for info in jobs.store.list(f"jobs/{job_id}/")
+        if not info.key.endswith("/manifest.json")
+    ]
+    manifest = {"job": job, "artifacts": artifacts, "written_at": time.time()}
+    jobs.store.put_bytes(f"jobs/{job_id}/manifest.json", json.dumps(manifest, indent=1).encode())
+
+
+def _fail(jobs: JobService, job_id: str, error: str) -> None:
+    finished_at = time.time()
+    jobs.store.put_bytes(
+        f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id) + f"error: {error}\n".encode()
+    )
+    jobs.transition(job_id, JobStatus.FAILED, error=error, finished_at=repr(finished_at))
+    _write_manifest(jobs, job_id, {})
+
+
+def merge_task(job_id: str) -> dict[str, Any]:
+    """Merge the chunks of ``job_id`` into the final artifacts, or fail the job if a chunk failed."""
+    jobs, rq_job = _context()
+    record = jobs.record(job_id)
+    if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
+        return {"skipped": record.get("status", "deleted")}
+    chunk_count = int(record["chunks"])
+    failures = _chunk_failures(jobs, job_id, chunk_count)
+    if failures:
+        _fail(jobs, job_id, "; ".join(failures))
+        return {"failed": failures}
+    from worker.render.api import merge_chunks
+
+    started_s = time.monotonic()
+    jobs.chunk_started(job_id, "merge", rq_job.worker_name or "")
+    with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-merge-") as tmp:
+        work_dir = Path(tmp)
+        scene = _load_inputs(jobs, job_id, work_dir)
+        chunk_paths = []
+        for index in range(chunk_count):
+            path = work_dir / "chunks" / f"{index}.npz"
+            jobs.store.get_file(chunk_key(job_id, index), path)
+            chunk_paths.append(path)
+        out_dir = work_dir / "out"
+        out_dir.mkdir()
+        os.chdir(work_dir)
+        summary = merge_chunks(scene, chunk_paths, out_dir)
+        for path in sorted(out_dir.rglob("*")):
+            if path.is_file():
+                jobs.store.put_file(f"jobs/{job_id}/{path.relative_to(out_dir).as_posix()}", path)
+    merge_s = time.monotonic() - started_s
+    jobs.chunk_finished(job_id, "merge", samples=0, seconds=merge_s)
+    jobs.store.put_bytes(f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id))
+    finished_at = time.time()
+    # The manifest is in place before the status says succeeded, so a client never misses it.
+    _write_manifest(jobs, job_id, {"status": "succeeded", "progress": 1.0})
+    jobs.transition(job_id, JobStatus.SUCCEEDED, finished_at=repr(finished_at))
+    _write_manifest(jobs, job_id, {})  # final timings (or "canceled", if a cancel won the race)
+    return {"summary": summary, "merge_s": merge_s}
