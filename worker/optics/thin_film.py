@@ -1,0 +1,122 @@
+"""Partially-coherent reflectance of a thin dielectric film over a substrate: Eq. (18) generalised to P beams.
+
+Layers: exterior (real index n_0) | film (real index n_f, thickness τ in m) | substrate (η_s = n + iκ,
+dielectric or conductor). With the interface amplitudes of ``worker.optics.fresnel`` (per polarisation) the
+beams leaving the film are
+
+    a_0 = r_01,    a_p = t_01 t_10 r_12 (r_10 r_12)^{p−1} e^{i p δ}  (p ≥ 1),    δ = 2 k q_1 τ,
+
+with k = 2π/λ (λ the vacuum wavelength, m) and q_1 = n_f cos θ_t the film's normal factor (complex beyond the
+film's critical angle, where e^{iδ} then decays). Beams p and q have travelled through the film a
+different number of times; the incident light's degree of coherence between them is V_{|p−q|}, the value of
+the incident HG function at the transverse separation |p−q|·τ·ẑ (Theorem 5.1(i); Eq. (18) is the two-beam
+case I_1 + I_2 + 2√(I_1 I_2)·V·cos(τφ_z)). The partially-coherent reflectance is
+
+    R = Σ_{p,q<P} a_p a_q* V_{|p−q|} = Σ_p |a_p|² + 2 Σ_{d≥1} V_d Re Σ_p a_{p+d} a_p*,    V_0 = 1,
+
+averaged over s and p polarisation (unpolarised light). V_d = 1 for all d and P → ∞ gives the Airy
+formula |(r_01 + r_12 e^{iδ})/(1 + r_01 r_12 e^{iδ})|²; V_d = 0 gives the incoherent sum Σ|a_p|². The caller
+supplies V_1 … V_{P−1} (dimensionless, in [0, 1]); for a 0th-mode (Gaussian) CSD they are
+V_d = V_1^{d²} (:func:`gaussian_visibilities`). Element-wise against ``ops``: runs on NumPy and in Dr.Jit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from worker.optics.array_ops import ArrayOps
+from worker.optics.complex_pair import ComplexPair
+from worker.optics.fresnel import interface_amplitudes, normal_factor
+
+
+def gaussian_visibilities(first_visibility: Any, count: int, ops: ArrayOps) -> list[Any]:
+    """V_1 … V_count for a Gaussian degree of coherence: V_d = exp(−½ d² ξᵀMξ) = V_1^{d²}.
+
+    Built by V_{d+1} = V_d · V_1^{2d+1} so that no powers or logarithms of V_1 are formed.
+    """
+    if count < 0:
+        raise ValueError(f"count: must be non-negative, got {count}")
+    visibilities: list[Any] = []
+    current = first_visibility
+    odd_power = first_visibility  # V_1^{2d+1}, starting at d = 0
+    v1_squared = first_visibility * first_visibility
+    for _ in range(count):
+        visibilities.append(current)
+        odd_power = odd_power * v1_squared
+        current = current * odd_power
+    return visibilities
+
+
+def beam_amplitudes(
+    r_01: ComplexPair, r_12: ComplexPair, film_phase: ComplexPair, beam_count: int
+) -> list[ComplexPair]:
+    """a_0 … a_{P−1} of one polarisation, using the Stokes relations r_10 = −r_01, t_01 t_10 = 1 − r_01²."""
+    amplitudes = [r_01]
+    if beam_count < 2:
+        return amplitudes
+    round_trip = film_phase * r_12
+    amplitudes.append((1.0 - r_01 * r_01) * round_trip)
+    bounce = -(r_01 * round_trip)  # r_10 r_12 e^{iδ}
+    for _ in range(2, beam_count):
+        amplitudes.append(amplitudes[-1] * bounce)
+    return amplitudes
+
+
+def partially_coherent_sum(amplitudes: Sequence[ComplexPair], visibilities: Sequence[Any]) -> Any:
+    """Σ_{p,q} a_p a_q* V_{|p−q|} with V_0 = 1 and V_d = ``visibilities[d−1]`` (real result)."""
+    total = amplitudes[0].abs2()
+    for amplitude in amplitudes[1:]:
+        total = total + amplitude.abs2()
+    for separation, visibility in enumerate(visibilities, start=1):
+        cross = 0.0
+        for p in range(len(amplitudes) - separation):
+            later, earlier = amplitudes[p + separation], amplitudes[p]
+            cross = cross + (later.re * earlier.re + later.im * earlier.im)  # Re(a_later a_earlier*)
+        total = total + 2.0 * visibility * cross
+    return total
+
+
+def thin_film_reflectance(
+    cos_theta_i: Any,
+    wavelength_m: Any,
+    thickness_m: Any,
+    film_ior: Any,
+    substrate_eta: ComplexPair,
+    exterior_ior: Any,
+    visibilities: Sequence[Any],
+    ops: ArrayOps,
+) -> Any:
+    """Unpolarised partially-coherent reflectance of a film on a substrate, P = len(visibilities) + 1 beams.
+
+    ``cos_theta_i`` is the cosine of the angle of incidence in the exterior medium (taken by magnitude);
+    ``substrate_eta`` the substrate's complex index (``ComplexPair``; κ = 0 for a dielectric). R ∈ [0, 1].
+    """
+    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
+    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
+    q_0 = ComplexPair.real(exterior_ior * cos_i)
+    q_1 = normal_factor(film_ior, invariant_sq, ops)
+    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
+    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
+    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
+    wavenumber_per_m = 2.0 * math.pi / wavelength_m
+    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
+    beam_count = len(visibilities) + 1
+    reflectance_s = partially_coherent_sum(
+        beam_amplitudes(top.r_s, bottom.r_s, film_phase, beam_count), visibilities
+    )
+    reflectance_p = partially_coherent_sum(
+        beam_amplitudes(top.r_p, bottom.r_p, film_phase, beam_count), visibilities
+    )
+    return 0.5 * (reflectance_s + reflectance_p)
+
+
+def validate_thin_film(thickness_m: float, film_ior: float, exterior_ior: float) -> None:
+    """Scene-level checks of the film constants (the kernels above cannot raise on Dr.Jit arrays)."""
+    if not (math.isfinite(thickness_m) and thickness_m >= 0.0):
+        raise ValueError(f"thickness_m: must be a finite length ≥ 0 m, got {thickness_m}")
+    if not (math.isfinite(film_ior) and film_ior >= 1.0):
+        raise ValueError(f"film_ior: must be a finite real index ≥ 1, got {film_ior}")
+    if not (math.isfinite(exterior_ior) and exterior_ior >= 1.0):
+        raise ValueError(f"exterior_ior: must be a finite real index ≥ 1, got {exterior_ior}")
