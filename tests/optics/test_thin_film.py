@@ -15,7 +15,12 @@ import pytest
 from worker.optics.array_ops import NUMPY
 from worker.optics.coherence import degree_of_coherence
 from worker.optics.complex_pair import ComplexPair
-from worker.optics.thin_film import gaussian_visibilities, thin_film_reflectance, validate_thin_film
+from worker.optics.thin_film import (
+    combine_reflectance_terms,
+    gaussian_visibilities,
+    thin_film_reflectance,
+    validate_thin_film,
+)
 
 ROUND_OFF = 1e-12
 
@@ -223,3 +228,5 @@ def test_validation_names_parameter() -> None:
         validate_thin_film(1e-7, float("nan"), 1.0)
     with pytest.raises(ValueError, match=r"^exterior_ior"):
         validate_thin_film(1e-7, 1.5, 0.5)
+    with pytest.raises(ValueError, match=r"^visibilities"):
+        combine_reflectance_terms([0.5, 0.1, 0.01], [1.0])

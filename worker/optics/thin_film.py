@@ -64,18 +64,64 @@ def beam_amplitudes(
     return amplitudes
 
 
-def partially_coherent_sum(amplitudes: Sequence[ComplexPair], visibilities: Sequence[Any]) -> Any:
-    """Σ_{p,q} a_p a_q* V_{|p−q|} with V_0 = 1 and V_d = ``visibilities[d−1]`` (real result)."""
-    total = amplitudes[0].abs2()
-    for amplitude in amplitudes[1:]:
-        total = total + amplitude.abs2()
-    for separation, visibility in enumerate(visibilities, start=1):
-        cross = 0.0
-        for p in range(len(amplitudes) - separation):
-            later, earlier = amplitudes[p + separation], amplitudes[p]
-            cross = cross + (later.re * earlier.re + later.im * earlier.im)  # Re(a_later a_earlier*)
-        total = total + 2.0 * visibility * cross
-    return total
+def film_amplitudes(
+    cos_theta_i: Any,
+    wavelength_m: Any,
+    thickness_m: Any,
+    film_ior: Any,
+    substrate_eta: ComplexPair,
+    exterior_ior: Any,
+    beam_count: int,
+    ops: ArrayOps,
+) -> tuple[list[ComplexPair], list[ComplexPair]]:
+    """Beam amplitudes (s, p) a_0 … a_{P−1} of a film of thickness τ (m) and index n_f on a substrate.
+
+    ``cos_theta_i`` is the cosine of the angle of incidence in the exterior medium (taken by magnitude);
+    ``substrate_eta`` the substrate's complex index (``ComplexPair``; κ = 0 for a dielectric).
+    """
+    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
+    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
+    q_0 = ComplexPair.real(exterior_ior * cos_i)
+    q_1 = normal_factor(film_ior, invariant_sq, ops)
+    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
+    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
+    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
+    wavenumber_per_m = 2.0 * math.pi / wavelength_m
+    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
+    return (
+        beam_amplitudes(top.r_s, bottom.r_s, film_phase, beam_count),
+        beam_amplitudes(top.r_p, bottom.r_p, film_phase, beam_count),
+    )
+
+
+def reflectance_terms(amplitudes: tuple[list[ComplexPair], list[ComplexPair]]) -> list[Any]:
+    """[R_incoherent, X_1, …, X_{P−1}], unpolarised (mean of s and p).
+
+    R(V) = Σ_{p,q} a_p a_q* V_{|p−q|} = R_incoherent + 2 Σ_{d≥1} V_d X_d is linear in the visibilities, with
+    R_incoherent = Σ_p |a_p|² and X_d = Σ_p Re(a_{p+d} a_p*); an integrator can keep these terms and apply
+    the visibilities once the incident coherence is known.
+    """
+    terms: list[Any] = []
+    for separation in range(len(amplitudes[0])):
+        total: Any = 0.0
+        for beams in amplitudes:
+            for p in range(len(beams) - separation):
+                later, earlier = beams[p + separation], beams[p]
+                total = total + 0.5 * (later.re * earlier.re + later.im * earlier.im)
+        terms.append(total)
+    return terms
+
+
+def combine_reflectance_terms(terms: Sequence[Any], visibilities: Sequence[Any]) -> Any:
+    """R = R_incoherent + 2 Σ_d V_d X_d with V_d = ``visibilities[d−1]`` (as many as there are X_d)."""
+    if len(visibilities) != len(terms) - 1:
+        raise ValueError(
+            f"visibilities: need {len(terms) - 1} values V_1 … V_{{P−1}}, got {len(visibilities)}"
+        )
+    reflectance = terms[0]
+    for term, visibility in zip(terms[1:], visibilities, strict=True):
+        reflectance = reflectance + 2.0 * visibility * term
+    return reflectance
 
 
 def thin_film_reflectance(
@@ -90,26 +136,19 @@ def thin_film_reflectance(
 ) -> Any:
     """Unpolarised partially-coherent reflectance of a film on a substrate, P = len(visibilities) + 1 beams.
 
-    ``cos_theta_i`` is the cosine of the angle of incidence in the exterior medium (taken by magnitude);
-    ``substrate_eta`` the substrate's complex index (``ComplexPair``; κ = 0 for a dielectric). R ∈ [0, 1].
+    Arguments as in :func:`film_amplitudes`; ``visibilities`` = V_1 … V_{P−1}. R ∈ [0, 1].
     """
-    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
-    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
-    q_0 = ComplexPair.real(exterior_ior * cos_i)
-    q_1 = normal_factor(film_ior, invariant_sq, ops)
-    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
-    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
-    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
-    wavenumber_per_m = 2.0 * math.pi / wavelength_m
-    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
-    beam_count = len(visibilities) + 1
-    reflectance_s = partially_coherent_sum(
-        beam_amplitudes(top.r_s, bottom.r_s, film_phase, beam_count), visibilities
+    amplitudes = film_amplitudes(
+        cos_theta_i,
+        wavelength_m,
+        thickness_m,
+        film_ior,
+        substrate_eta,
+        exterior_ior,
+        len(visibilities) + 1,
+        ops,
     )
-    reflectance_p = partially_coherent_sum(
-        beam_amplitudes(top.r_p, bottom.r_p, film_phase, beam_count), visibilities
-    )
-    return 0.5 * (reflectance_s + reflectance_p)
+    return combine_reflectance_terms(reflectance_terms(amplitudes), visibilities)
 
 
 def validate_thin_film(thickness_m: float, film_ior: float, exterior_ior: float) -> None:
