@@ -213,7 +213,7 @@ class Renderer:
             cmf = mi.cie1931_xyz(wavelengths[j])
             for c in range(3):
                 xyz[c] += cmf[c] * result.radiance[j] * (span / lane_count)
-                albedo_xyz[c] += cmf[c] * result.albedo[j] * (span / lane_count) / mi.MI_CIE_Y_NORMALIZATION
+                albedo_xyz[c] += cmf[c] * result.albedo[j] * (span / lane_count) * mi.MI_CIE_Y_NORMALIZATION
         per_sample = {
             "diag_w": result.diag_weight,
             "diag_mxx": result.diag_mxx,
