@@ -30,7 +30,7 @@ from worker.optics.array_ops import drjit_ops
 from worker.optics.complex_pair import ComplexPair
 from worker.optics.fresnel import fresnel_dielectric, fresnel_reflectance
 from worker.render import materials as mat
-from worker.render.film_terms import film_amplitudes, reflectance_terms
+from worker.optics.thin_film import combine_reflectance_terms, film_amplitudes, reflectance_terms
 from worker.render.spectral import lookup
 
 OPS = drjit_ops()
@@ -439,8 +439,6 @@ class MaterialKernels:
 
 
 def combine_film_terms(terms: list[Any], visibility_at: Callable[[int], Any]) -> Any:
-    """R(V) = R_incoherent + 2 Σ_d V_d X_d — the partially coherent multi-beam sum (Eq. 18 for P = 2)."""
-    reflectance = terms[0]
-    for separation in range(1, len(terms)):
-        reflectance = reflectance + 2.0 * visibility_at(separation) * terms[separation]
-    return dr.maximum(reflectance, 0.0)
+    """R(V) of the partially coherent multi-beam sum, V_d = ``visibility_at(d)`` (Eq. 18 for P = 2)."""
+    visibilities = [visibility_at(separation) for separation in range(1, len(terms))]
+    return dr.maximum(combine_reflectance_terms(terms, visibilities), 0.0)
