@@ -286,3 +286,27 @@ def test_invalid_mode_counts() -> None:
     for modes in (0, 65, 2.5, True):
         with pytest.raises(ValueError, match=r"^modes:"):
             source_coefficients("disk", modes)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("exit_angle_deg", [0.0, 40.0, 75.0])
+def test_scattering_region_disk_consequences(exit_angle_deg: float) -> None:
+    # Modelling choice (docs/physics.md §7): a non-specular vertex scatters from a uniform disk of radius a
+    # in its tangent plane, seen foreshortened. Leaving at θ from the normal: Σ⊥ eigenvalues a²/4 and
+    # a²cos²θ/4, so anisotropy = 1/cos θ and ℓ₁ lies along the projected normal (the narrow direction).
+    from worker.optics.coherence import coherence_diagnostics
+
+    radius, r = 1e-3, 0.25
+    theta = math.radians(exit_angle_deg)
+    normal = (0.0, 0.0, 1.0)
+    exit_direction = (math.sin(theta), 0.0, math.cos(theta))  # plane of exit: x–z
+    x_axis, y_axis = transverse_frame(exit_direction)
+    sxx, sxy, syy = disk_covariance_components(radius, normal, tuple(x_axis), tuple(y_axis))
+    diagnostics = coherence_diagnostics(np.array([[sxx, sxy], [sxy, syy]]), r)
+    assert diagnostics.anisotropy == pytest.approx(1 / math.cos(theta), rel=1e-12)
+    k = 2 * math.pi / 550e-9
+    assert diagnostics.l2_um == pytest.approx(1e6 * r / (k * radius / 2), rel=1e-12)
+    if exit_angle_deg > 0.0:
+        l1_axis = math.cos(diagnostics.angle) * x_axis + math.sin(diagnostics.angle) * y_axis
+        projected_normal = np.array(normal) - np.dot(normal, exit_direction) * np.array(exit_direction)
+        projected_normal /= np.linalg.norm(projected_normal)
+        assert abs(float(l1_axis @ projected_normal)) == pytest.approx(1.0, abs=1e-12)
