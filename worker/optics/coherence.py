@@ -244,6 +244,14 @@ def degree_of_coherence(
     scale = wavenumber_per_m(wavelength_m) / r_m
     x_frequency = scale * xi_m[0]
     y_frequency = scale * xi_m[1]
+    if set(coefficients) == {(0, 0)}:
+        # 0th mode: ĉ₀₀ h₀(u₁)h₀(u₂) = ĉ₀₀/√π · exp(−½ xᵀΣx), no eigen-decomposition needed.
+        quadratic = (
+            sigma_xx * x_frequency * x_frequency
+            + 2.0 * sigma_xy * x_frequency * y_frequency
+            + sigma_yy * y_frequency * y_frequency
+        )
+        return (coefficients[(0, 0)] / math.sqrt(math.pi)) * ops.exp(-0.5 * quadratic)
     lambda_major, lambda_minor, cos_phi, sin_phi = principal_axes_components(
         sigma_xx, sigma_xy, sigma_yy, ops
     )

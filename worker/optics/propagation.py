@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -79,7 +79,10 @@ class CoherenceState:
         distance_m: float,
         coefficients: Mapping[tuple[int, int], float] | None = None,
     ) -> CoherenceState:
-        """The beam a source (``sources.transverse_covariance``) gives after ``distance_m`` of free space."""
+        """The beam a source (``sources.transverse_covariance``) gives after ``distance_m`` of free space.
+
+        ``coefficients``: the source's HG modes (``sources.source_coefficients``); default the 0th mode.
+        """
         state = cls(
             sigma_m2=covariance.sigma_m2,
             x_axis=covariance.x_axis,
@@ -87,23 +90,18 @@ class CoherenceState:
             direction=covariance.direction,
             r_m=float(distance_m),
         )
-        if coefficients is None:
-            return state
-        return cls(**{**state.__dict__, "coefficients": dict(coefficients)})
+        return state if coefficients is None else replace(state, coefficients=dict(coefficients))
 
     @property
     def theta_per_m2(self) -> np.ndarray:
         """The shape matrix Θ = Σ⊥⁻¹ (1/m²)."""
         return shape_matrix_from_covariance(self.sigma_m2)
 
-    def _with(self, **changes: Any) -> CoherenceState:
-        return CoherenceState(**{**self.__dict__, **changes})
-
     def propagated(self, distance_m: float) -> CoherenceState:
         """After ``distance_m`` more metres of free space: r grows, Θ and the frame are unchanged."""
         if not (distance_m >= 0.0 and math.isfinite(distance_m)):
             raise ValueError(f"distance_m: must be a non-negative finite distance, got {distance_m}")
-        return self._with(r_m=self.r_m + float(distance_m))
+        return replace(self, r_m=self.r_m + float(distance_m))
 
     def reflected(self, normal: Sequence[float]) -> CoherenceState:
         """After a perfect mirror with surface ``normal`` (either side): frame mirrored, Θ kept, r kept."""
@@ -113,8 +111,8 @@ class CoherenceState:
         x_axis = householder @ self.x_axis
         sigma = self.sigma_m2.copy()
         sigma[0, 1] = sigma[1, 0] = -self.sigma_m2[0, 1]  # y' = −Hy (module docstring)
-        return self._with(
-            sigma_m2=sigma, x_axis=x_axis, y_axis=np.cross(direction, x_axis), direction=direction
+        return replace(
+            self, sigma_m2=sigma, x_axis=x_axis, y_axis=np.cross(direction, x_axis), direction=direction
         )
 
     def refracted(self, normal: Sequence[float], relative_ior: float) -> CoherenceState:
@@ -137,7 +135,7 @@ class CoherenceState:
         direction = direction / np.linalg.norm(direction)
         rotation = _rotation_between(self.direction, direction)
         x_axis = rotation @ self.x_axis
-        return self._with(x_axis=x_axis, y_axis=np.cross(direction, x_axis), direction=direction)
+        return replace(self, x_axis=x_axis, y_axis=np.cross(direction, x_axis), direction=direction)
 
     def in_frame(self, x_axis: Sequence[float]) -> CoherenceState:
         """The same beam with Σ⊥ expressed in the transverse frame with x axis ``x_axis`` (⟂ direction)."""
@@ -149,7 +147,7 @@ class CoherenceState:
         rotation = np.array(
             [[new_x @ self.x_axis, new_x @ self.y_axis], [new_y @ self.x_axis, new_y @ self.y_axis]]
         )
-        return self._with(sigma_m2=rotation @ self.sigma_m2 @ rotation.T, x_axis=new_x, y_axis=new_y)
+        return replace(self, sigma_m2=rotation @ self.sigma_m2 @ rotation.T, x_axis=new_x, y_axis=new_y)
 
     def diagnostics(self, wavelength_m: float = DEFAULT_WAVELENGTH_M) -> CoherenceDiagnostics:
         """ℓ₁, ℓ₂, angle, anisotropy, area and M of this beam (``coherence.coherence_diagnostics``)."""
