@@ -15,6 +15,7 @@ import pytest
 from worker.optics.array_ops import NUMPY
 from worker.optics.coherence import degree_of_coherence
 from worker.optics.complex_pair import ComplexPair
+from worker.optics.sources import cylinder_covariance_components
 from worker.optics.thin_film import (
     combine_reflectance_terms,
     gaussian_visibilities,
@@ -201,7 +202,9 @@ def test_cylinder_source_gives_direction_dependent_visibility() -> None:
     (ℓ ≈ 0.9 µm) V_1 ≤ 0.58. With two dominant beams the fringe visibility is ∝ V_1, so the ratio of fringe
     visibilities is ≈ V_short/V_long ≥ 1.7; we require 1.5."""
     wavelength_m, distance_m = 550e-9, 0.6
-    sigma = (0.2**2 / 12.0, 0.0, (2 * 0.001) ** 2 / 12.0)  # x = cylinder axis (long), y = across (short)
+    # Side-on cylinder along the transverse x axis: x = long source axis, y = across (short).
+    sigma = cylinder_covariance_components(0.001, 0.2, (1.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+    assert sigma[0] == pytest.approx(0.2**2 / 12.0) and sigma[2] == pytest.approx((2 * 0.001) ** 2 / 12.0)
     theta = math.radians(60.0)
     thickness_m = np.linspace(1.1e-6, 1.4e-6, 2001)
     cos_i = np.full_like(thickness_m, math.cos(theta))
