@@ -16,12 +16,12 @@ from worker.optics.sources import SOURCE_KINDS
 
 # calculator parameter → command-line flag, so that error messages name what the user typed.
 _FLAG_FOR_PARAMETER = {
-    "radius": "--radius",
-    "length": "--length",
-    "width": "--width",
-    "height": "--height",
-    "sigma": "--sigma",
-    "distance": "--distance",
+    "radius_m": "--radius",
+    "length_m": "--length",
+    "width_m": "--width",
+    "height_m": "--height",
+    "sigma_m": "--sigma",
+    "distance_m": "--distance",
     "wavelength_nm": "--wavelength-nm",
     "axis": "--axis",
     "direction": "--direction",

@@ -88,10 +88,10 @@ def test_oblique_cylinder_angle_and_frame() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "parameter"),
     [
-        ({"source": "sphere", "distance_m": 1.0}, "radius"),
-        ({"source": "sphere", "radius_m": -0.1, "distance_m": 1.0}, "radius"),
-        ({"source": "sphere", "radius_m": 0.1, "distance_m": 0.0}, "distance"),
-        ({"source": "sphere", "radius_m": 0.1, "distance_m": float("nan")}, "distance"),
+        ({"source": "sphere", "distance_m": 1.0}, "radius_m"),
+        ({"source": "sphere", "radius_m": -0.1, "distance_m": 1.0}, "radius_m"),
+        ({"source": "sphere", "radius_m": 0.1, "distance_m": 0.0}, "distance_m"),
+        ({"source": "sphere", "radius_m": 0.1, "distance_m": float("nan")}, "distance_m"),
         ({"source": "sphere", "radius_m": 0.1, "distance_m": 1.0, "wavelength_nm": 199.0}, "wavelength_nm"),
         ({"source": "sphere", "radius_m": 0.1, "distance_m": 1.0, "wavelength_nm": 2501.0}, "wavelength_nm"),
         ({"source": "sphere", "radius_m": 0.1, "distance_m": 1.0, "modes": 65}, "modes"),

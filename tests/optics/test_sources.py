@@ -264,12 +264,12 @@ def test_drjit_covariance_components_equal_numpy() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "parameter"),
     [
-        ({"kind": "sphere"}, "radius"),
-        ({"kind": "sphere", "radius_m": -1.0}, "radius"),
-        ({"kind": "sphere", "radius_m": 0.0}, "radius"),
-        ({"kind": "cylinder", "radius_m": 1.0, "length_m": float("nan")}, "length"),
-        ({"kind": "rect", "width_m": 1.0}, "height"),
-        ({"kind": "gaussian", "sigma_m": float("inf")}, "sigma"),
+        ({"kind": "sphere"}, "radius_m"),
+        ({"kind": "sphere", "radius_m": -1.0}, "radius_m"),
+        ({"kind": "sphere", "radius_m": 0.0}, "radius_m"),
+        ({"kind": "cylinder", "radius_m": 1.0, "length_m": float("nan")}, "length_m"),
+        ({"kind": "rect", "width_m": 1.0}, "height_m"),
+        ({"kind": "gaussian", "sigma_m": float("inf")}, "sigma_m"),
         ({"kind": "sphere", "radius_m": 1.0, "direction": (0.0, 0.0, 0.0)}, "direction"),
         ({"kind": "cylinder", "radius_m": 1.0, "length_m": 1.0, "axis": (0.0, 0.0, 0.0)}, "axis"),
         ({"kind": "disk", "radius_m": 1.0, "axis": (0.0, 0.0, 2.0)}, "axis"),
@@ -284,7 +284,7 @@ def test_invalid_source_parameters(kwargs: dict, parameter: str) -> None:
 
 def test_invalid_mode_counts() -> None:
     for modes in (0, 65, 2.5, True):
-        with pytest.raises(ValueError, match=r"^modes:"):
+        with pytest.raises(ValueError, match=r"^mode_count:"):
             source_coefficients("disk", modes)  # type: ignore[arg-type]
 
 

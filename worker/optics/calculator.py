@@ -75,7 +75,7 @@ def coherence_at(
     if source not in SOURCE_KINDS:
         raise ValueError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {source!r}")
     wavelength_m = _wavelength_m(wavelength_nm)
-    distance = positive_size(distance_m, "distance")
+    distance = positive_size(distance_m, "distance_m")
     mode_count = _mode_count(modes)
     covariance = transverse_covariance(
         source,

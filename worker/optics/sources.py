@@ -211,20 +211,20 @@ def transverse_covariance(
     x_axis, y_axis = transverse_frame(unit_direction, reference)
     frame = (tuple(x_axis), tuple(y_axis))
     if kind == "sphere":
-        components = sphere_covariance_components(positive_size(radius_m, "radius"))
+        components = sphere_covariance_components(positive_size(radius_m, "radius_m"))
     elif kind == "gaussian":
-        components = gaussian_covariance_components(positive_size(sigma_m, "sigma"))
+        components = gaussian_covariance_components(positive_size(sigma_m, "sigma_m"))
     elif kind == "cylinder":
         components = cylinder_covariance_components(
-            positive_size(radius_m, "radius"), positive_size(length_m, "length"), tuple(unit_axis), *frame
+            positive_size(radius_m, "radius_m"), positive_size(length_m, "length_m"), tuple(unit_axis), *frame
         )
     elif kind == "disk":
-        radius = positive_size(radius_m, "radius")
+        radius = positive_size(radius_m, "radius_m")
         u_axis, v_axis = facing_plane_axes(unit_axis, unit_direction)
         normal = cross3(tuple(u_axis), tuple(v_axis))
         components = disk_covariance_components(radius, normal, *frame)
     else:
-        width, height = positive_size(width_m, "width"), positive_size(height_m, "height")
+        width, height = positive_size(width_m, "width_m"), positive_size(height_m, "height_m")
         u_axis, v_axis = facing_plane_axes(unit_axis, unit_direction)
         components = rectangle_covariance_components(width, height, tuple(u_axis), tuple(v_axis), *frame)
     sxx, sxy, syy = (float(c) for c in components)
@@ -335,7 +335,7 @@ def source_coefficients(kind: str, mode_count: int) -> dict[tuple[int, int], flo
     per (kind, mode_count) by Gauss–Hermite quadrature and cached. Use with ``coherence.degree_of_coherence``.
     """
     if isinstance(mode_count, bool) or not isinstance(mode_count, int) or not 1 <= mode_count <= MAX_MODES:
-        raise ValueError(f"modes: must be an integer in 1..{MAX_MODES}, got {mode_count!r}")
+        raise ValueError(f"mode_count: must be an integer in 1..{MAX_MODES}, got {mode_count!r}")
     coefficient_kind = COEFFICIENT_KIND.get(kind, kind)
     if coefficient_kind not in ("disk", "rect", "gaussian"):
         raise ValueError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {kind!r}")
