@@ -7,7 +7,7 @@ import re
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio  # noqa: N813
+import OpenImageIO as oiio
 import pytest
 
 from tests.integrator.scenes import plane_under_source

@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio  # noqa: N813
+import OpenImageIO as oiio
 
 from tests.integrator.scenes import plane_under_source
 from worker.optics.calculator import coherence_at

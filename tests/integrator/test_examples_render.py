@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio  # noqa: N813
+import OpenImageIO as oiio
 import pytest
 
 from worker.render.api import render_scene

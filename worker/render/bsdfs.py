@@ -29,8 +29,8 @@ from worker.optics import rough_surface
 from worker.optics.array_ops import drjit_ops
 from worker.optics.complex_pair import ComplexPair
 from worker.optics.fresnel import fresnel_dielectric, fresnel_reflectance
-from worker.render import materials as mat
 from worker.optics.thin_film import combine_reflectance_terms, film_amplitudes, reflectance_terms
+from worker.render import materials as mat
 from worker.render.spectral import lookup
 
 OPS = drjit_ops()

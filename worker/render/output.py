@@ -102,7 +102,7 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
 
 
 def _write_exr(path: Path, channels: list[tuple[str, np.ndarray]], attributes: dict[str, str]) -> None:
-    import OpenImageIO as oiio  # noqa: N813 - the library's customary alias
+    import OpenImageIO as oiio
 
     height, width = channels[0][1].shape
     pixels = np.stack([data for _, data in channels], axis=-1).astype(np.float32)

@@ -151,7 +151,7 @@ class Renderer:
         progress: Callable[[float], None] | None = None,
         should_stop: Callable[[], bool] | None = None,
     ) -> PixelSums:
-        """Per-pixel sums of ``spp`` samples per pixel with ``seed``; raises ``RenderCanceledError`` on stop."""
+        """Per-pixel sums of ``spp`` samples per pixel with ``seed``; ``RenderCanceledError`` on stop."""
         pixels = self.width * self.height
         spp_per_pass = max(1, min(spp, MAX_WAVEFRONT // max(pixels, 1)))
         total: PixelSums | None = None
