@@ -186,6 +186,9 @@ def check_usd_layers(root_file: Path, bundle_dir: Path, limits: SceneLimits) -> 
                 if prim_spec is None:
                     return
                 where = _layer_where(layer, bundle_dir, path)
+                # Value clips name further layers in prim metadata; refuse them rather than track them.
+                if any(prim_spec.HasInfo(key) for key in ("clips", "clipSets")):
+                    raise SceneError.at(where, "value clips are not supported in uploaded scenes")
                 for arc in (
                     *prim_spec.referenceList.GetAddedOrExplicitItems(),
                     *prim_spec.payloadList.GetAddedOrExplicitItems(),
