@@ -241,3 +241,18 @@ def test_transmission_lobe(surface: RoughSurface) -> None:
 def test_invalid_surface_names_field(kwargs: dict, field: str) -> None:
     with pytest.raises(ValueError, match=f"^{field}"):
         RoughSurface(**kwargs)
+
+
+def test_invalid_samples_return_finite_normal() -> None:
+    """A heavy-tailed ABC PSD (C = 1.05) drawn at u1 → 1 overflows float32 radii; such samples are invalid,
+    with pdf 0 and the normal as a finite placeholder direction."""
+    surface = RoughSurface(rms_height_m=10e-9, correlation_length_m=1e-6, psd_model="abc", abc_exponent=1.05)
+    u1 = np.array([0.0, 0.5, 1.0 - 1e-12, 1.0 - 1e-16])
+    wi = tuple(np.full(u1.size, c[0]) for c in _direction(0.3))
+    with np.errstate(over="ignore", invalid="ignore"):
+        wo, pdf, valid = rough_reflection_sample(surface, wi, 500e-9, u1, np.full(u1.size, 0.25), NUMPY)
+    assert np.all(np.isfinite(np.stack(wo)))
+    assert not valid[-1] and pdf[-1] == 0.0
+    np.testing.assert_allclose(
+        np.stack(wo)[:, ~valid], np.array([[0.0], [0.0], [1.0]]) * np.ones((1, (~valid).sum()))
+    )

@@ -43,6 +43,7 @@ from typing import Any
 
 from worker.optics.array_ops import ArrayOps, hermite_functions
 from worker.optics.coherence import max_degree, principal_axes_components
+from worker.optics.rough_surface import hemisphere_direction
 
 METRES_PER_MICRON = 1e-6
 
@@ -290,6 +291,6 @@ def grating_sample(
     beta_y = chosen_y + l_21 * z_1 + l_22 * z_2
     beta_sq = beta_x * beta_x + beta_y * beta_y
     valid = (beta_sq < 1.0) & (wi[2] > 0.0) & (total_efficiency > 0.0)
-    wo = (beta_x, beta_y, ops.sqrt(ops.maximum(1.0 - beta_sq, 0.0)))
+    wo = hemisphere_direction(beta_x, beta_y, valid, ops)
     pdf = ops.where(valid, grating_pdf(grating, wi, wo, wavelength_m, source_angular_cov, ops), 0.0)
     return wo, pdf, valid, total_efficiency

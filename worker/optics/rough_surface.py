@@ -121,6 +121,24 @@ def transmission_roughness_exponent(
     return phase * phase
 
 
+def hemisphere_direction(
+    beta_x: Any, beta_y: Any, valid: Any, ops: ArrayOps, lower: bool = False
+) -> tuple[Any, Any, Any]:
+    """Unit direction with direction cosines β (z ≥ 0, or ≤ 0 if ``lower``); the normal where not ``valid``.
+
+    Invalid samples (|β| ≥ 1, or non-finite β from an extreme PSD draw) get ±ẑ so that no NaN direction
+    reaches the ray tracer; their pdf and weight are 0.
+    """
+    beta_sq = beta_x * beta_x + beta_y * beta_y
+    z = ops.sqrt(ops.maximum(1.0 - beta_sq, 0.0))
+    sign = -1.0 if lower else 1.0
+    return (
+        ops.where(valid, beta_x, 0.0),
+        ops.where(valid, beta_y, 0.0),
+        ops.where(valid, sign * z, sign),
+    )
+
+
 def _lobe_density_beta(
     surface: RoughSurface,
     wi: Any,
@@ -181,8 +199,7 @@ def rough_reflection_sample(
     beta_y = wavelength_in_medium_m * fy - wi[1]
     beta_sq = beta_x * beta_x + beta_y * beta_y
     valid = (beta_sq < 1.0) & (wi[2] > 0.0)
-    wo_z = ops.sqrt(ops.maximum(1.0 - beta_sq, 0.0))
-    wo = (beta_x, beta_y, wo_z)
+    wo = hemisphere_direction(beta_x, beta_y, valid, ops)
     pdf = ops.where(valid, rough_reflection_pdf(surface, wi, wo, wavelength_m, ops, exterior_ior), 0.0)
     return wo, pdf, valid
 
@@ -244,7 +261,7 @@ def rough_transmission_sample(
     beta_y = (wavelength_m * fy - exterior_ior * wi[1]) / interior_ior
     beta_sq = beta_x * beta_x + beta_y * beta_y
     valid = (beta_sq < 1.0) & (wi[2] > 0.0)
-    wt = (beta_x, beta_y, -ops.sqrt(ops.maximum(1.0 - beta_sq, 0.0)))
+    wt = hemisphere_direction(beta_x, beta_y, valid, ops, lower=True)
     pdf = ops.where(
         valid, rough_transmission_pdf(surface, wi, wt, wavelength_m, ops, exterior_ior, interior_ior), 0.0
     )
