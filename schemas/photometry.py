@@ -27,7 +27,13 @@ from schemas.scene import (
     SphereEmitter,
     TabulatedSpectrum,
 )
-from worker.optics.spectra import cie_cmf, cie_illuminant, planck_radiance
+from worker.optics.spectra import (
+    cie_cmf,
+    cie_illuminant,
+    planck_radiance,
+    spectrum_to_xyz,
+    xyz_to_linear_srgb,
+)
 
 SpectrumModel = ConstantSpectrum | BlackbodySpectrum | D65Spectrum | CieFSpectrum | TabulatedSpectrum
 EmitterModel = SphereEmitter | CylinderEmitter | RectangleEmitter | DiskEmitter
@@ -93,6 +99,15 @@ def emitter_radiance_scale(
     if spectral_integral <= 0.0:
         raise ValueError("spectrum: zero over the film's wavelength range, so power_w cannot be met")
     return emitter.power_w / (math.pi * emitter_area_m2(emitter) * spectral_integral)
+
+
+def reflectance_rgb(spectrum: SpectrumModel) -> tuple[float, float, float]:
+    """Approximate linear-sRGB colour of a reflectance under equal-energy light (white Y = 1), clipped."""
+    wavelengths = np.arange(VISIBLE_MIN_NM, VISIBLE_MAX_NM + 1.0)
+    white_y = float(spectrum_to_xyz(wavelengths, np.ones_like(wavelengths))[1])
+    rgb = xyz_to_linear_srgb(spectrum_to_xyz(wavelengths, evaluate_spectrum(spectrum, wavelengths)) / white_y)
+    red, green, blue = (float(c) for c in np.clip(rgb, 0.0, 1.0))
+    return red, green, blue
 
 
 def rgb_spectrum(rgb: tuple[float, float, float]) -> SpectrumModel:

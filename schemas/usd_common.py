@@ -27,6 +27,14 @@ LAYER_DATA_KEY = "hgrender"
 MATERIAL_ID_ATTRIBUTE = "hg:id"
 #: Attribute naming the hgrender model type on a prim (``hg:type``).
 TYPE_ATTRIBUTE = "hg:type"
+#: Linear RGB of the metals for the preview surface only (DCC display): roughly their normal-incidence colour.
+CONDUCTOR_PREVIEW_RGB = {
+    "Ag": (0.97, 0.96, 0.91),
+    "Au": (1.0, 0.78, 0.34),
+    "Cu": (0.96, 0.64, 0.54),
+    "Al": (0.91, 0.92, 0.92),
+    "perfect": (1.0, 1.0, 1.0),
+}
 
 
 def snake_to_camel(name: str) -> str:

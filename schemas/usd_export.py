@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils, Vt
 
-from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_scale
+from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_scale, reflectance_rgb
 from schemas.scene import (
     CylinderEmitter,
     CylinderShape,
@@ -49,6 +49,7 @@ from schemas.scene import (
     ThinFilmMaterial,
 )
 from schemas.usd_common import (
+    CONDUCTOR_PREVIEW_RGB,
     LAYER_DATA_KEY,
     MATERIAL_ID_ATTRIBUTE,
     numpy_to_gf_matrix,
@@ -60,14 +61,6 @@ USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 #: Sensor width written for cameras given by field of view, mm (full-frame 35 mm film).
 DEFAULT_SENSOR_WIDTH_MM = 36.0
 DISK_POLYGON_SIDES = 48
-#: Linear RGB of the metals for the preview surface only (DCC display): roughly their normal-incidence colour.
-CONDUCTOR_PREVIEW_RGB = {
-    "Ag": (0.97, 0.96, 0.91),
-    "Au": (1.0, 0.78, 0.34),
-    "Cu": (0.96, 0.64, 0.54),
-    "Al": (0.91, 0.92, 0.92),
-    "perfect": (1.0, 1.0, 1.0),
-}
 
 
 def _unit(vector: Any) -> np.ndarray:
@@ -147,8 +140,8 @@ def _write_preview_surface(stage: Usd.Stage, material: UsdShade.Material, model:
     shader.CreateIdAttr("UsdPreviewSurface")
     diffuse_rgb, metallic, roughness, opacity, ior = (0.5, 0.5, 0.5), 0.0, 0.5, 1.0, 1.5
     if isinstance(model, DiffuseMaterial):
-        value = model.reflectance if isinstance(model.reflectance, float) else 0.5
-        diffuse_rgb = (value, value, value)
+        reflectance = model.reflectance
+        diffuse_rgb = (reflectance,) * 3 if isinstance(reflectance, float) else reflectance_rgb(reflectance)
     elif isinstance(model, MirrorMaterial | RoughConductorMaterial | GratingMaterial):
         diffuse_rgb, metallic = CONDUCTOR_PREVIEW_RGB[model.conductor], 1.0
         roughness = 0.0 if isinstance(model, MirrorMaterial) else 0.3

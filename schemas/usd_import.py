@@ -54,6 +54,7 @@ from schemas.mesh_files import fan_triangulate, load_scene_meshes
 from schemas.photometry import rgb_spectrum, tinted_spectrum
 from schemas.scene import SCHEMA_ID, Emitter, Material, PerspectiveCamera, Scene, Shape
 from schemas.usd_common import (
+    CONDUCTOR_PREVIEW_RGB,
     LAYER_DATA_KEY,
     MATERIAL_ID_ATTRIBUTE,
     TYPE_ATTRIBUTE,
@@ -62,12 +63,12 @@ from schemas.usd_common import (
     snake_to_camel,
     stage_to_scene_matrix,
 )
-from schemas.usd_export import CONDUCTOR_PREVIEW_RGB
 from schemas.validation import problems_from_validation_error, validate_scene
 
 SHAPE_ADAPTER: TypeAdapter[Any] = TypeAdapter(Shape)
 EMITTER_ADAPTER: TypeAdapter[Any] = TypeAdapter(Emitter)
 MATERIAL_ADAPTER: TypeAdapter[Any] = TypeAdapter(Material)
+CAMERA_ADAPTER: TypeAdapter[Any] = TypeAdapter(PerspectiveCamera)
 #: UsdPreviewSurface roughness below which surfaces are taken as perfectly smooth (mirror / glass).
 SMOOTH_ROUGHNESS = 0.05
 #: Correlation length given to rough surfaces mapped from a UsdPreviewSurface roughness, µm.
@@ -382,7 +383,7 @@ class _StageConverter:
             uses_hg = True
         else:
             data, uses_hg = self._generic_camera(prim), False
-        model = _validated_element(TypeAdapter(PerspectiveCamera), data, prim, uses_hg)
+        model = _validated_element(CAMERA_ADAPTER, data, prim, uses_hg)
         return model.model_dump(mode="json", exclude_none=True)
 
     def _generic_camera(self, prim: Usd.Prim) -> dict[str, Any]:
