@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from schemas import scene as model
+from schemas.photometry import evaluate_spectrum
 from worker.optics import ior as ior_data
-from worker.optics import spectra
 from worker.optics.grating import BinaryGrating
 from worker.optics.rough_surface import RoughSurface
 from worker.render import materials as mat
@@ -44,29 +44,18 @@ class CompiledScene:
 
 
 def spectrum_on(spectrum: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
-    """Values of a scene spectrum (or a plain number) at ``wavelengths_nm``."""
+    """A scene spectrum (or a plain number) at ``wavelengths_nm``, normalised as in docs/scenes.md."""
     if isinstance(spectrum, int | float):
         return np.full(wavelengths_nm.shape, float(spectrum))
-    if spectrum.type == "constant":
-        return np.full(wavelengths_nm.shape, spectrum.value)
-    if spectrum.type == "tabulated":
-        return np.interp(wavelengths_nm, spectrum.wavelengths_nm, spectrum.values, left=0.0, right=0.0)
-    if spectrum.type == "blackbody":
-        return spectra.planck_radiance(wavelengths_nm, spectrum.temperature_k)
-    if spectrum.type == "d65":
-        return spectra.cie_illuminant("d65", wavelengths_nm)
-    if spectrum.type == "cie_f":
-        return spectra.cie_illuminant(spectrum.name, wavelengths_nm)
-    raise ValueError(f"spectrum: unsupported type {spectrum.type!r}")
+    return evaluate_spectrum(spectrum, wavelengths_nm)
 
 
 def _ior_on_grid(ior: float | str, grid_nm: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """(n, κ, dispersive) of a real index or a named material on the grid (held constant outside its data)."""
+    """(n, κ, dispersive) of a real index or a named material on the grid (end values held outside)."""
     if isinstance(ior, int | float):
         return np.full(grid_nm.shape, float(ior)), np.zeros(grid_nm.shape), False
-    low_nm, high_nm = ior_data.material_range_nm(ior)
-    n, kappa = ior_data.spectral_ior(ior, np.clip(grid_nm, low_nm, high_nm))
-    return n, kappa, True
+    rows = ior_data.ior_table(ior, grid_nm)
+    return rows[:, 1], rows[:, 2], True
 
 
 def _normalized(vector: list[float]) -> np.ndarray:
