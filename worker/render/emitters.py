@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 
@@ -72,13 +73,32 @@ class EmitterTable:
         return {record.kind for record in self.records}
 
 
-def emitter_coherence(mi, table, kinds, emitter_index, receiver, frame_x, frame_y):
-    """Σ⊥ of emitter ``emitter_index`` (UInt32 per lane) seen from ``receiver`` (Point3f, world).
+def emitter_direction(mi: Any, table: Any, emitter_index: Any, receiver: Any) -> tuple[Any, Any]:
+    """(distance_m, direction): centre-to-receiver distance r (m) and unit direction centre → receiver."""
+    import drjit as dr
 
-    Returns ``(sigma_xx, sigma_xy, sigma_yy, distance_m, direction)``: Σ⊥ in m² expressed in the frame
-    spanned by ``frame_x``/``frame_y`` (which the caller makes ⟂ to ``direction``), the centre-to-receiver
-    distance r (m) and the unit propagation direction centre → receiver. Only branches for emitter
-    ``kinds`` present in the scene are compiled into the kernel.
+    base = emitter_index * STRIDE
+    center = mi.Vector3f(*(dr.gather(mi.Float, table, base + CENTER + i) for i in range(3)))
+    offset = receiver - center
+    distance = dr.norm(offset)
+    direction = dr.select(distance > 0, offset / dr.maximum(distance, 1e-12), mi.Vector3f(0, 0, 1))
+    return distance, direction
+
+
+def emitter_coherence(
+    mi: Any,
+    table: Any,
+    kinds: set[EmitterKind],
+    emitter_index: Any,
+    direction: Any,
+    frame_x: Any,
+    frame_y: Any,
+) -> tuple[Any, Any, Any]:
+    """Σ⊥ (m²) of emitter ``emitter_index`` (UInt32 per lane) seen along ``direction`` (centre → receiver).
+
+    Returns ``(sigma_xx, sigma_xy, sigma_yy)`` in the frame spanned by ``frame_x``/``frame_y``, which the
+    caller makes ⟂ to ``direction``. Only branches for emitter ``kinds`` present in the scene are compiled
+    into the kernel.
     """
     import drjit as dr
 
@@ -94,13 +114,8 @@ def emitter_coherence(mi, table, kinds, emitter_index, receiver, frame_x, frame_
         return mi.Vector3f(read(offset), read(offset + 1), read(offset + 2))
 
     kind = mi.UInt32(read(KIND))
-    center = read3(CENTER)
-    offset = receiver - center
-    distance = dr.norm(offset)
-    direction = offset / dr.maximum(distance, 1e-12)
     radius = read(RADIUS)
     sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
-    direction = dr.select(distance > 0, direction, mi.Vector3f(0, 0, 1))
 
     def choose(mask, candidate):
         return tuple(dr.select(mask, c, s) for c, s in zip(candidate, sigma, strict=True))
@@ -129,4 +144,5 @@ def emitter_coherence(mi, table, kinds, emitter_index, receiver, frame_x, frame_
             kind == int(EmitterKind.DISK),
             sources.disk_covariance_components(radius, vec(read3(AXIS)), fx, fy),
         )
-    return sigma[0], sigma[1], sigma[2], distance, direction
+    del direction  # the silhouettes' projections depend on the frame ⟂ to it only
+    return sigma

@@ -35,11 +35,11 @@ import drjit as dr
 
 from worker.mitsuba_setup import load_mitsuba
 from worker.optics.array_ops import drjit_ops
-from worker.optics.coherence import degree_of_coherence, diagnostics_components
+from worker.optics.coherence import degree_of_coherence
 from worker.optics.frames import transverse_frame_components
 from worker.render import materials as mat
 from worker.render.bsdfs import IncidentCoherence, MaterialKernels, combine_film_terms
-from worker.render.emitters import emitter_coherence
+from worker.render.emitters import emitter_coherence, emitter_direction
 from worker.render.spectral import LAMBDA_REFERENCE_NM, BandLayout
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
@@ -62,6 +62,7 @@ class RenderContext:
     emitter_index: Any  # mi.UInt32: emitter registry id -> emitter record
     emitter_kinds: set
     coefficients: dict  # (n, m) -> ĉ of the universal source expansion used for visibilities
+    black_material: int  # index of the absorbing material (emitters, misses)
     camera_right: Any  # world-space unit vectors of the image's +x and +y (up) directions
     camera_up: Any
 
@@ -81,12 +82,12 @@ class PathResult:
     albedo: Any
 
 
-def _luminance(wavelengths: Any, value: Any, span_nm: float) -> Any:
-    """Y of a four-wavelength spectral estimate: (Λ/4) Σ_j ȳ(λ_j)·value_j (CIE 1931 ȳ)."""
+def _luminance(y_weights: Any, value: Any) -> Any:
+    """Y of a four-wavelength spectral estimate: Σ_j w_j·value_j with w_j = (Λ/4)·ȳ(λ_j) (CIE 1931 ȳ)."""
     total = mi.Float(0.0)
-    for j in range(len(wavelengths)):
-        total += mi.cie1931_y(wavelengths[j]) * value[j]
-    return total * (span_nm / len(wavelengths))
+    for j in range(len(y_weights)):
+        total += y_weights[j] * value[j]
+    return total
 
 
 def _reflect_vector(vector: Any, normal: Any) -> Any:
@@ -153,11 +154,29 @@ class HGPathIntegrator(mi.SamplingIntegrator):
     def _screen_angle_terms(
         self, sxx: Any, sxy: Any, syy: Any, frame_x: Any, frame_y: Any
     ) -> tuple[Any, Any]:
-        """(cos 2ψ, sin 2ψ) of the screen-space angle ψ of the ℓ₁ axis (smallest eigenvalue of Σ⊥)."""
-        comps = diagnostics_components(sxx, sxy, syy, 1.0, LAMBDA_REFERENCE_NM * 1e-9, OPS)
-        axis = frame_x * dr.cos(comps.angle) + frame_y * dr.sin(comps.angle)
-        psi = dr.atan2(dr.dot(axis, self.context.camera_up), dr.dot(axis, self.context.camera_right))
-        return dr.cos(2.0 * psi), dr.sin(2.0 * psi)
+        """(cos 2ψ, sin 2ψ) of the screen-space angle ψ of the ℓ₁ axis (smallest eigenvalue of Σ⊥).
+
+        Algebraic throughout (no trigonometry in the kernel): the ℓ₁ axis of [[a, b], [b, c]] has doubled
+        angle 2φ with (cos 2φ, sin 2φ) = −(a − c, 2b)/h, h = √((a − c)² + 4b²); half-angle formulas give
+        the axis (cos φ, sin φ); its screen projection (X, Y) gives cos 2ψ = (X² − Y²)/(X² + Y²) and
+        sin 2ψ = 2XY/(X² + Y²). An isotropic Σ⊥ has no axis and contributes (0, 0).
+        """
+        difference = sxx - syy
+        h = dr.sqrt(dr.square(difference) + 4.0 * dr.square(sxy))
+        isotropic = h <= 1e-6 * (sxx + syy)
+        safe_h = dr.select(isotropic, 1.0, h)
+        cos_2phi = -difference / safe_h
+        sin_2phi = -2.0 * sxy / safe_h
+        cos_phi = dr.sqrt(dr.maximum(0.5 * (1.0 + cos_2phi), 0.0))
+        sin_phi = dr.mulsign(dr.sqrt(dr.maximum(0.5 * (1.0 - cos_2phi), 0.0)), sin_2phi)
+        axis = frame_x * cos_phi + frame_y * sin_phi
+        x = dr.dot(axis, self.context.camera_right)
+        y = dr.dot(axis, self.context.camera_up)
+        norm2 = dr.maximum(x * x + y * y, 1e-20)
+        return (
+            dr.select(isotropic, 0.0, (x * x - y * y) / norm2),
+            dr.select(isotropic, 0.0, 2.0 * x * y / norm2),
+        )
 
     # ------------------------------------------------------------------ Mitsuba interface
     def sample(
@@ -187,6 +206,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         film_beams = self.kernels.max_beams
 
         wavelengths = mi.Spectrum(ray.wavelengths)
+        y_weights = [
+            mi.cie1931_y(wavelengths[j]) * (span_nm / len(wavelengths)) for j in range(len(wavelengths))
+        ]
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
         eta_scale = mi.Float(1.0)
@@ -224,7 +246,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         d_s2 = mi.Float(0.0)
         aov_depth = mi.Float(0.0)
         aov_normal = mi.Vector3f(0.0)
-        aov_albedo = mi.Spectrum(0.0)
+        aov_material = mi.UInt32(self.context.black_material)
 
         while dr.hint(active, max_iterations=self.max_depth + 1, label="hg_path"):
             si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
@@ -245,14 +267,14 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             first = valid & (depth == 0)
             aov_depth = dr.select(first, si.t, aov_depth)
             aov_normal = dr.select(first, si.sh_frame.n, aov_normal)
-            aov_albedo = dr.select(first, self.kernels.albedo(material, wavelengths), aov_albedo)
+            aov_material = dr.select(first, material, aov_material)
 
             # --- resolve the pending vertex's incident coherence: the source is what we just reached
             resolve = pending & (hit_emitter | nonspecular)
             to_prev = -ray.d
             em_record = self._emitter_lookup(emitter_ptr)
-            em_sxx, em_sxy, em_syy, _, _ = emitter_coherence(
-                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, si.p, frame_x, frame_y
+            em_sxx, em_sxy, em_syy = emitter_coherence(
+                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, ray.d, frame_x, frame_y
             )
             sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, to_prev, frame_x, frame_y)
             src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
@@ -286,7 +308,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             mis = dr.select(prev_skip_emission, 0.0, mis)
             emitted = dr.select(hit_emitter, beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)
             L += emitted
-            weight_em = _luminance(wavelengths, emitted, span_nm)
+            weight_em = _luminance(y_weights, emitted)
             add_indirect = indirect_ready & seen_nonspecular
             d_w += dr.select(add_indirect, weight_em, 0.0)
             d_mxx += dr.select(add_indirect, weight_em * ind_mxx, 0.0)
@@ -311,14 +333,16 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(do_nee), True, do_nee)
             do_nee &= ds_em.pdf != 0.0
             em_record_nee = self._emitter_lookup(ds_em.emitter)
-            nee_dir_guess = dr.normalize(si.p - ds_em.p)
-            nee_fx, nee_fy = self._frame_for(nee_dir_guess)
-            nee_sxx, nee_sxy, nee_syy, nee_r, nee_dir = emitter_coherence(
-                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record_nee, si.p, nee_fx, nee_fy
-            )
+            nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
             nee_fx, nee_fy = self._frame_for(nee_dir)
-            nee_sxx, nee_sxy, nee_syy, nee_r, nee_dir = emitter_coherence(
-                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record_nee, si.p, nee_fx, nee_fy
+            nee_sxx, nee_sxy, nee_syy = emitter_coherence(
+                mi,
+                self.context.emitter_flat,
+                self.context.emitter_kinds,
+                em_record_nee,
+                nee_dir,
+                nee_fx,
+                nee_fy,
             )
             nee_coherence = IncidentCoherence(nee_sxx, nee_sxy, nee_syy, nee_r, nee_fx, nee_fy)
             wo_em = frame.to_local(ds_em.d)
@@ -335,7 +359,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 mis_em = dr.select(kind == int(mat.MaterialKind.GRATING), 1.0, mis_em)
             direct = dr.select(do_nee, beta * bsdf_value * em_weight * mis_em, 0.0)
             L += direct
-            weight_direct = _luminance(wavelengths, direct, span_nm)
+            weight_direct = _luminance(y_weights, direct)
             # Direct light at the first non-specular vertex: the emitter's own Σ⊥ (camera-aligned frame).
             at_first = do_nee & ~seen_nonspecular
             nee_scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(nee_r, 1e-9))
@@ -405,6 +429,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             active = continue_path & (beta_max > 0.0) & (~rr_active | survive)
             depth += 1
 
+        aov_albedo = self.kernels.albedo(aov_material, wavelengths)
         return PathResult(L, d_w, d_mxx, d_mxy, d_myy, d_r, d_c2, d_s2, aov_depth, aov_normal, aov_albedo)
 
 

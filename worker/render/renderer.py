@@ -22,7 +22,7 @@ from worker.optics.sources import source_coefficients
 from worker.render.integrator import HGPathIntegrator, RenderContext, register
 from worker.render.scene_compiler import CompiledScene
 
-MAX_WAVEFRONT = 1 << 21
+MAX_WAVEFRONT = 1 << 20  # samples per pass: ~40 float32 outputs each stay in memory until reduced
 SUM_KEYS = (
     "diag_w",
     "diag_mxx",
@@ -127,6 +127,7 @@ class Renderer:
             emitter_flat=mi.Float(compiled.emitter_table.flat()),
             emitter_index=mi.UInt32(emitter_index),
             emitter_kinds=kinds,
+            black_material=len(compiled.material_table.records) - 1,
             coefficients=source_coefficients("disk", compiled.scene.film.modes),
             camera_right=mi.Vector3f(*right),
             camera_up=mi.Vector3f(*up),
@@ -232,6 +233,9 @@ class Renderer:
             "luminance": xyz[1],
             "luminance_sq": dr.square(xyz[1]),
         }
+        # Evaluate every per-sample output in one launch of the path megakernel: reducing them one by one
+        # would re-run the whole path loop for each output.
+        dr.eval(band_values, per_sample)
         reduced_bands = [dr.block_sum(v, spp) for v in band_values]
         reduced_bands_sq = [dr.block_sum(dr.square(v), spp) for v in band_values]
         reduced = {key: dr.block_sum(value, spp) for key, value in per_sample.items()}
