@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from hgrender.imaging import auto_exposure_ev, display_rgb8
 from worker.optics import spectra
 from worker.optics.coherence import diagnostics_components
 from worker.render.renderer import PixelSums
@@ -148,27 +149,13 @@ def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path
     return ["image.exr", "variance.exr", "preview.png"]
 
 
-def tone_map(rgb: np.ndarray, exposure_ev: float = 0.0) -> np.ndarray:
-    """8-bit sRGB: linear × 2^EV, clamp, sRGB transfer curve (IEC 61966-2-1)."""
-    linear = np.clip(rgb * (2.0**exposure_ev), 0.0, 1.0)
-    encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1 / 2.4) - 0.055)
-    return np.round(encoded * 255.0).astype(np.uint8)
-
-
-def auto_exposure_ev(rgb: np.ndarray) -> float:
-    """EV that maps the 99th percentile of luminance to 1 (0 for a black image)."""
-    luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
-    high = float(np.percentile(luminance, 99.0))
-    return 0.0 if high <= 0 or not math.isfinite(high) else -math.log2(high)
-
-
 def preview_png(rgb: np.ndarray) -> bytes:
     import io
 
     from PIL import Image
 
     buffer = io.BytesIO()
-    Image.fromarray(tone_map(rgb, auto_exposure_ev(rgb))).save(buffer, format="PNG")
+    Image.fromarray(display_rgb8(rgb, auto_exposure_ev(rgb))).save(buffer, format="PNG")
     return buffer.getvalue()
 
 

@@ -1,0 +1,53 @@
+"""Display transforms shared by the renderer's preview, the service's viewer endpoints and the viewer.
+
+NumPy only (the service imports it). The viewer's JavaScript implements the same formulas; tests compare
+canvas pixels with :func:`display_rgb8` of the same data.
+
+* exposure: linear × 2^EV;
+* tone mapping operators on linear sRGB: ``clamp`` (identity, then clip), ``reinhard`` (x/(1+x) per
+  channel) and ``aces`` (Narkowicz 2015 fit of the ACES filmic curve, (x(2.51x+0.03))/(x(2.43x+0.59)+0.14));
+* the sRGB transfer curve (IEC 61966-2-1) and 8-bit quantisation (round half up).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+TONE_MAPS = ("clamp", "reinhard", "aces")
+REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def tone_map(linear_rgb: np.ndarray, operator: str = "clamp") -> np.ndarray:
+    """Tone-mapped linear values in [0, 1] (before the transfer curve)."""
+    x = np.maximum(np.asarray(linear_rgb, dtype=np.float64), 0.0)
+    if operator == "clamp":
+        mapped = x
+    elif operator == "reinhard":
+        mapped = x / (1.0 + x)
+    elif operator == "aces":
+        mapped = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
+    else:
+        raise ValueError(f"tonemap: must be one of {', '.join(TONE_MAPS)}, got {operator!r}")
+    return np.clip(mapped, 0.0, 1.0)
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """The sRGB transfer curve of values in [0, 1]."""
+    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1.0 / 2.4) - 0.055)
+
+
+def display_rgb8(linear_rgb: np.ndarray, exposure_ev: float = 0.0, operator: str = "clamp") -> np.ndarray:
+    """8-bit sRGB for display: exposure, tone mapping, transfer curve, round half up."""
+    if not math.isfinite(exposure_ev):
+        raise ValueError(f"ev: must be finite, got {exposure_ev}")
+    encoded = srgb_encode(tone_map(np.asarray(linear_rgb, dtype=np.float64) * 2.0**exposure_ev, operator))
+    return np.floor(encoded * 255.0 + 0.5).astype(np.uint8)
+
+
+def auto_exposure_ev(linear_rgb: np.ndarray, percentile: float = 99.0) -> float:
+    """EV that maps the given percentile of luminance to 1 (0 for a black image)."""
+    luminance = np.asarray(linear_rgb, dtype=np.float64) @ REC709_LUMINANCE
+    high = float(np.percentile(luminance, percentile))
+    return 0.0 if high <= 0 or not math.isfinite(high) else -math.log2(high)
