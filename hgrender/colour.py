@@ -1,0 +1,147 @@
+"""Colour science for comparing renders: band spectra or linear sRGB → CIE XYZ → CIELAB (D65) → CIEDE2000.
+
+* XYZ of a band image: X = Σ_b L_b ∫_band x̄(λ) dλ (and likewise Y, Z) for equal-width bands given by their
+  centres, with the CIE 1931 2° colour-matching functions of ``worker.optics.spectra.cie_cmf`` (NumPy only).
+  Units: L_b in W·m⁻²·sr⁻¹·nm⁻¹ gives XYZ in W·m⁻²·sr⁻¹ (scaled later by the reference white).
+* CIELAB (CIE 15:2004 §8.2.1): L* = 116 f(Y/Yn) − 16, a* = 500 [f(X/Xn) − f(Y/Yn)], b* = 200 [f(Y/Yn) −
+  f(Z/Zn)], f(t) = t^⅓ above (6/29)³ and t/(3 (6/29)²) + 4/29 below; white (Xn, Yn, Zn) = D65 scaled to Yn.
+* CIEDE2000 ΔE₀₀ (CIE 142-2001) in the implementation of Sharma, Wu & Dalal, Color Res. Appl. 30(1), 2005,
+  Eqs. (1)–(22), with k_L = k_C = k_H = 1. Hue angles are in degrees; the hue-difference and mean-hue
+  branches compare |h′₁ − h′₂| with 180° up to 1e-9° because that difference is exactly 180° in exact
+  arithmetic for the antipodal pairs of Sharma's table (pair 14), and rounding must not pick a branch.
+* Linear sRGB → XYZ: IEC 61966-2-1:1999 §5.2 (D65 white; rows sum to the white point), and the display ΔE₀₀
+  of two linear-sRGB images after the viewer's exposure and tone map (``hgrender.imaging``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hgrender.imaging import tone_map
+from worker.optics.spectra import cie_cmf
+
+D65_WHITE_XYZ: np.ndarray = np.array([0.95047, 1.0, 1.08883])
+"""CIE D65 white point (2° observer), normalised to Y = 1 (CIE 15:2004 Table T.3)."""
+
+LINEAR_SRGB_TO_XYZ: np.ndarray = np.array(
+    [
+        [0.4124564, 0.3575761, 0.1804375],
+        [0.2126729, 0.7151522, 0.0721750],
+        [0.0193339, 0.1191920, 0.9503041],
+    ]
+)
+"""IEC 61966-2-1 linear sRGB → CIE XYZ (D65), to 7 digits."""
+
+_HUE_TIE_DEG = 1e-9
+_LAB_EPSILON = (6.0 / 29.0) ** 3
+
+
+def band_xyz_weights(band_centers_nm: np.ndarray, step_nm: float = 1.0) -> np.ndarray:
+    """∫_band (x̄, ȳ, z̄) dλ for equal-width bands given by their centres (nm); shape (B, 3).
+
+    The band edges are the centres ± half their spacing, as in the renderer's ``BandLayout``.
+    """
+    centers_nm = np.asarray(band_centers_nm, dtype=float)
+    if centers_nm.ndim != 1 or centers_nm.size < 2 or not np.all(np.diff(centers_nm) > 0.0):
+        raise ValueError("band_centers_nm: must be at least 2 strictly increasing band centres")
+    width_nm = float(np.mean(np.diff(centers_nm)))
+    weights = np.zeros((centers_nm.size, 3))
+    for band, center_nm in enumerate(centers_nm):
+        low_nm, high_nm = center_nm - 0.5 * width_nm, center_nm + 0.5 * width_nm
+        grid_nm = np.clip(np.arange(low_nm, high_nm + 0.5 * step_nm, step_nm), low_nm, high_nm)
+        weights[band] = np.trapezoid(cie_cmf(grid_nm), grid_nm, axis=0)
+    return weights
+
+
+def bands_to_xyz(band_values: np.ndarray, band_centers_nm: np.ndarray) -> np.ndarray:
+    """CIE XYZ of band radiances ``band_values`` (..., B) with band centres in nm; shape (..., 3)."""
+    return np.asarray(band_values, dtype=float) @ band_xyz_weights(band_centers_nm)
+
+
+def xyz_to_lab(xyz: np.ndarray, white_xyz: np.ndarray) -> np.ndarray:
+    """CIELAB L*, a*, b* of ``xyz`` (..., 3) relative to the white ``white_xyz`` (3,), same units."""
+    white = np.asarray(white_xyz, dtype=float)
+    if white.shape != (3,) or np.any(white <= 0.0):
+        raise ValueError("white_xyz: must be three positive tristimulus values")
+    ratio = np.asarray(xyz, dtype=float) / white
+    f = np.where(ratio > _LAB_EPSILON, np.cbrt(ratio), ratio / (3.0 * (6.0 / 29.0) ** 2) + 4.0 / 29.0)
+    lightness = 116.0 * f[..., 1] - 16.0
+    return np.stack([lightness, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], axis=-1)
+
+
+def linear_srgb_to_xyz(linear_rgb: np.ndarray) -> np.ndarray:
+    """CIE XYZ (D65, Y = 1 for white) of linear sRGB values, last axis of size 3."""
+    values = np.asarray(linear_rgb, dtype=float)
+    if values.shape[-1] != 3:
+        raise ValueError(f"linear_rgb: last axis must have size 3, got shape {values.shape}")
+    return values @ LINEAR_SRGB_TO_XYZ.T
+
+
+def linear_srgb_to_lab(linear_rgb: np.ndarray) -> np.ndarray:
+    """CIELAB (D65 white, Y = 1) of linear sRGB values, last axis of size 3."""
+    return xyz_to_lab(linear_srgb_to_xyz(linear_rgb), D65_WHITE_XYZ)
+
+
+def delta_e00_display(
+    reference_rgb: np.ndarray, sample_rgb: np.ndarray, exposure_ev: float, tonemap: str
+) -> np.ndarray:
+    """Per-pixel ΔE₀₀ of two linear-sRGB images (..., 3) as displayed: × 2^EV, tone map, then CIELAB
+    with the display white (1, 1, 1) as reference white; shape (...)."""
+    scale = 2.0**exposure_ev
+    reference = tone_map(np.asarray(reference_rgb, dtype=float) * scale, tonemap)
+    sample = tone_map(np.asarray(sample_rgb, dtype=float) * scale, tonemap)
+    return ciede2000(linear_srgb_to_lab(reference), linear_srgb_to_lab(sample))
+
+
+def ciede2000(lab_reference: np.ndarray, lab_sample: np.ndarray) -> np.ndarray:
+    """CIEDE2000 colour difference ΔE₀₀ between CIELAB arrays of equal shape (..., 3) (Sharma et al.
+    2005); symmetric in its arguments."""
+    lab_1, lab_2 = np.asarray(lab_reference, dtype=float), np.asarray(lab_sample, dtype=float)
+    if lab_1.shape != lab_2.shape or lab_1.shape[-1:] != (3,):
+        raise ValueError(
+            f"lab_sample: shape {lab_2.shape} must equal lab_reference's {lab_1.shape} with a last axis "
+            "of size 3 (L*, a*, b*)"
+        )
+    l_1, a_1, b_1 = np.moveaxis(lab_1, -1, 0)
+    l_2, a_2, b_2 = np.moveaxis(lab_2, -1, 0)
+    # Eqs. (2)-(7): a' rescaled by G so that near-neutral colours get a less compressed hue.
+    chroma_mean_7 = ((np.hypot(a_1, b_1) + np.hypot(a_2, b_2)) / 2.0) ** 7
+    g = 0.5 * (1.0 - np.sqrt(chroma_mean_7 / (chroma_mean_7 + 25.0**7)))
+    a_1p, a_2p = (1.0 + g) * a_1, (1.0 + g) * a_2
+    c_1p, c_2p = np.hypot(a_1p, b_1), np.hypot(a_2p, b_2)
+    h_1p = np.where(c_1p == 0.0, 0.0, np.degrees(np.arctan2(b_1, a_1p)) % 360.0)
+    h_2p = np.where(c_2p == 0.0, 0.0, np.degrees(np.arctan2(b_2, a_2p)) % 360.0)
+    # Eqs. (8)-(11): differences; the hue difference wraps into [-180, 180].
+    chroma_product = c_1p * c_2p
+    dh = h_2p - h_1p
+    dh = np.where(dh > 180.0 + _HUE_TIE_DEG, dh - 360.0, np.where(dh < -180.0 - _HUE_TIE_DEG, dh + 360.0, dh))
+    dh = np.where(chroma_product == 0.0, 0.0, dh)
+    d_lp, d_cp = l_2 - l_1, c_2p - c_1p
+    d_hp = 2.0 * np.sqrt(chroma_product) * np.sin(np.radians(dh / 2.0))
+    # Eqs. (12)-(21): means, weighting functions and the rotation term.
+    l_mean, c_mean = (l_1 + l_2) / 2.0, (c_1p + c_2p) / 2.0
+    h_sum = h_1p + h_2p
+    h_mean = np.where(
+        np.abs(h_1p - h_2p) <= 180.0 + _HUE_TIE_DEG,
+        h_sum / 2.0,
+        np.where(h_sum < 360.0, (h_sum + 360.0) / 2.0, (h_sum - 360.0) / 2.0),
+    )
+    h_mean = np.where(chroma_product == 0.0, h_sum, h_mean)
+    t = (
+        1.0
+        - 0.17 * np.cos(np.radians(h_mean - 30.0))
+        + 0.24 * np.cos(np.radians(2.0 * h_mean))
+        + 0.32 * np.cos(np.radians(3.0 * h_mean + 6.0))
+        - 0.20 * np.cos(np.radians(4.0 * h_mean - 63.0))
+    )
+    d_theta = 30.0 * np.exp(-(((h_mean - 275.0) / 25.0) ** 2))
+    c_mean_7 = c_mean**7
+    r_c = 2.0 * np.sqrt(c_mean_7 / (c_mean_7 + 25.0**7))
+    s_l = 1.0 + 0.015 * (l_mean - 50.0) ** 2 / np.sqrt(20.0 + (l_mean - 50.0) ** 2)
+    s_c = 1.0 + 0.045 * c_mean
+    s_h = 1.0 + 0.015 * c_mean * t
+    r_t = -np.sin(np.radians(2.0 * d_theta)) * r_c
+    # Eq. (22).
+    return np.sqrt(
+        (d_lp / s_l) ** 2 + (d_cp / s_c) ** 2 + (d_hp / s_h) ** 2 + r_t * (d_cp / s_c) * (d_hp / s_h)
+    )
