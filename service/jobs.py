@@ -367,7 +367,10 @@ class JobService:
         value = self.client.hget(_JOB_KEY.format(job_id), "status")
         return JobStatus(value.decode()) if value is not None else None
 
-    def chunk_started(self, job_id: str, index: int | str, worker: str, spp: int | None = None) -> None:
+    def chunk_started(
+        self, job_id: str, index: int | str, worker: str, pid: int, spp: int | None = None
+    ) -> None:
+        """A work horse (process ``pid`` of ``worker``) began chunk ``index`` (or ``merge``)."""
         prefix = f"{index}."
         with self.client.pipeline() as pipe:
             pipe.hset(
@@ -376,6 +379,7 @@ class JobService:
                     prefix + "status": "running",
                     prefix + "progress": "0",
                     prefix + "worker": worker,
+                    prefix + "pid": str(pid),
                     prefix + "spp": "" if spp is None else str(spp),
                     prefix + "started_at": repr(time.time()),
                 },
@@ -426,9 +430,13 @@ class JobService:
         if index != "merge":
             self.chunk_progress(job_id, int(index), 1.0)
 
+    def chunk_fields(self, job_id: str) -> dict[str, str]:
+        """The raw ``<i>.<field>`` / ``merge.<field>`` bookkeeping of a job's chunks."""
+        return _decode(self.client.hgetall(_CHUNKS_KEY.format(job_id)))
+
     def chunk_completions(self, job_id: str) -> dict[str, int]:
         """How many times each chunk (and ``merge``) ran to completion."""
-        fields = _decode(self.client.hgetall(_CHUNKS_KEY.format(job_id)))
+        fields = self.chunk_fields(job_id)
         return {
             k.removesuffix(".completions"): int(v) for k, v in fields.items() if k.endswith(".completions")
         }

@@ -70,13 +70,16 @@ class _CancelPoll:
         return self._stop
 
 
-def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> dict[str, Any]:
-    """The job's scene, with the files of an uploaded bundle copied under ``work_dir`` (the render's cwd,
-    against which the scene's relative file paths resolve)."""
+def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> tuple[dict[str, Any], Path | None]:
+    """The job's scene and, for an uploaded bundle, the local folder its files were copied to (the
+    renderer resolves the scene's relative file paths against it)."""
     input_prefix = f"jobs/{job_id}/input/"
-    for info in jobs.store.list(input_prefix):
-        jobs.store.get_file(info.key, work_dir / info.key[len(input_prefix) :])
-    return json.loads(jobs.store.get_bytes(scene_key(job_id)))
+    bundle_dir = work_dir / "input"
+    inputs = jobs.store.list(input_prefix)
+    for info in inputs:
+        jobs.store.get_file(info.key, bundle_dir / info.key[len(input_prefix) :])
+    scene = json.loads(jobs.store.get_bytes(scene_key(job_id)))
+    return scene, bundle_dir if inputs else None
 
 
 def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
@@ -88,19 +91,19 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
     from worker.render.api import plan_chunks, render_chunk
 
     chunk = plan_chunks(int(record["spp"]), int(record["chunks"]), int(record["seed"]))[chunk_index]
-    jobs.chunk_started(job_id, chunk_index, rq_job.worker_name or "", chunk.spp)
+    jobs.chunk_started(job_id, chunk_index, rq_job.worker_name or "", os.getpid(), chunk.spp)
     should_stop = _CancelPoll(jobs, job_id)
     with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-{chunk_index}-") as tmp:
         work_dir = Path(tmp)
-        scene = _load_inputs(jobs, job_id, work_dir)
+        scene, bundle_dir = _load_inputs(jobs, job_id, work_dir)
         out_path = work_dir / f"chunk-{chunk_index}.npz"
-        os.chdir(work_dir)  # the horse is a forked process of its own; relative scene paths resolve here
         result = render_chunk(
             scene,
             chunk,
             out_path,
             progress=_ProgressReporter(jobs, job_id, chunk_index, jobs.settings.progress_interval_s),
             should_stop=should_stop,
+            bundle_dir=bundle_dir,
         )
         if should_stop(force=True):
             jobs.set_chunk_status(job_id, chunk_index, "canceled")
@@ -181,10 +184,10 @@ def merge_task(job_id: str) -> dict[str, Any]:
     from worker.render.api import merge_chunks
 
     started_s = time.monotonic()
-    jobs.chunk_started(job_id, "merge", rq_job.worker_name or "")
+    jobs.chunk_started(job_id, "merge", rq_job.worker_name or "", os.getpid())
     with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-merge-") as tmp:
         work_dir = Path(tmp)
-        scene = _load_inputs(jobs, job_id, work_dir)
+        scene, _ = _load_inputs(jobs, job_id, work_dir)
         chunk_paths = []
         for index in range(chunk_count):
             path = work_dir / "chunks" / f"{index}.npz"
@@ -192,8 +195,7 @@ def merge_task(job_id: str) -> dict[str, Any]:
             chunk_paths.append(path)
         out_dir = work_dir / "out"
         out_dir.mkdir()
-        os.chdir(work_dir)
-        summary = merge_chunks(scene, chunk_paths, out_dir)
+        summary = merge_chunks(scene, chunk_paths, out_dir, extra_summary={"job_id": job_id})
         for path in sorted(out_dir.rglob("*")):
             if path.is_file():
                 jobs.store.put_file(f"jobs/{job_id}/{path.relative_to(out_dir).as_posix()}", path)

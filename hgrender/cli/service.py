@@ -85,6 +85,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 # ---- server side ---------------------------------------------------------------------------------------
 
 
+def worker_command_line(*extra_args: str) -> list[str]:
+    """The command that runs ``hgrender worker`` with this interpreter (no installed script needed)."""
+    return [
+        sys.executable,
+        "-c",
+        "import sys; from hgrender.cli import main; sys.exit(main())",
+        "worker",
+        *extra_args,
+    ]
+
+
 class WorkerSupervisor:
     """Keeps ``count`` ``hgrender worker`` child processes alive (a crashed worker is replaced)."""
 
@@ -96,7 +107,7 @@ class WorkerSupervisor:
         self._thread = threading.Thread(target=self._supervise, name="worker-supervisor", daemon=True)
 
     def _spawn(self) -> subprocess.Popen[bytes]:
-        return subprocess.Popen([sys.executable, "-m", "hgrender.cli", "worker"], env=self.env)
+        return subprocess.Popen(worker_command_line(), env=self.env)
 
     def start(self) -> None:
         self.processes = [self._spawn() for _ in range(self.count)]

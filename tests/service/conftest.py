@@ -8,7 +8,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -21,6 +20,7 @@ import pytest
 import redis
 import uvicorn
 
+from hgrender.cli.service import worker_command_line
 from hgrender.client import HgrenderClient
 from service.auth import TokenRegistry
 from service.core.config import Settings
@@ -80,7 +80,7 @@ class LiveService:
     def start_worker(self, name: str | None = None, **env_overrides: str) -> subprocess.Popen[bytes]:
         """An ``hgrender worker`` subprocess in its own session (so a test can kill all of it)."""
         env = {**os.environ, **self.settings.to_env(), **env_overrides}
-        command = [sys.executable, "-m", "hgrender.cli", "worker"] + (["--name", name] if name else [])
+        command = worker_command_line(*(["--name", name] if name else []))
         log = (self.settings.data_dir / f"worker-{name or len(self.workers)}.log").open("wb")
         process = subprocess.Popen(
             command, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
@@ -88,9 +88,16 @@ class LiveService:
         self.workers.append(process)
         return process
 
-    def stop_workers(self) -> None:
+    def stop_workers(self, timeout_s: float = 15.0) -> None:
+        """Warm shutdown (SIGTERM: RQ releases its scheduler lock and registers its death), then
+        SIGKILL of whatever is left in each worker's process group."""
         for process in self.workers:
-            with contextlib.suppress(ProcessLookupError):
+            if process.poll() is None:
+                process.terminate()
+        for process in self.workers:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                process.wait(timeout=timeout_s)
+            with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(process.pid, signal.SIGKILL)
             process.wait()
         self.workers.clear()

@@ -1,0 +1,384 @@
+"""Data the browser viewer needs, computed from a job's ``image.exr``: a layer catalogue, raw layer arrays,
+pixel records, server-side display images, coherence-ellipse grids and two-job differences.
+
+Each EXR is read once with OpenImageIO and its decoded channels are kept in an LRU cache bounded by a
+number of images (:class:`DecodedImageCache`). NumPy and OpenImageIO only: the service never imports
+Mitsuba or Dr.Jit.
+
+Conventions. Pixel (x, y) counts from the top-left corner, x to the right and y down (EXR row order).
+``coherence.angle`` is the screen-space orientation of the ℓ₁ axis in radians, measured from image +x
+towards image +y *up* (counter-clockwise on screen). Lengths ℓ₁, ℓ₂ are 1/√e half-widths of
+|μ(ξ)| = exp(−½ ξᵀMξ) at λ = 550 nm (BRIEF); M in m⁻². Band radiances are band-averaged spectral
+radiances in W·m⁻²·sr⁻¹·nm⁻¹; ``R``, ``G``, ``B`` are linear sRGB of the same unit scale.
+
+Downsampling (``step`` N): radiometric layers (bands, RGB) are averaged over N×N blocks (the same as
+rendering with N×N larger pixels); every other layer (diagnostics, depth, normals, albedo) is sampled at
+the top-left pixel of each block, because the mean of angles or of per-path lengths is not a diagnostic.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import tempfile
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from hgrender.colour import D65_WHITE_XYZ, ciede2000, xyz_to_lab
+from hgrender.imaging import REC709_LUMINANCE, display_rgb8, tone_map
+from service.store.base import ArtifactNotFoundError, ArtifactStore
+from worker.optics.spectra import XYZ_TO_LINEAR_SRGB
+
+IMAGE_ARTIFACT = "image.exr"
+BAND_PREFIX = "S0."
+RGB_LAYER = "rgb"
+COHERENCE_LAYERS = ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy")
+LINEAR_SRGB_TO_XYZ = np.linalg.inv(XYZ_TO_LINEAR_SRGB)
+RADIANCE_UNIT = "W·m⁻²·sr⁻¹·nm⁻¹"
+_UNITS = {
+    "coherence.l1_um": "µm",
+    "coherence.l2_um": "µm",
+    "coherence.angle": "rad",
+    "coherence.anisotropy": "1",
+    "coherence.area_um2": "µm²",
+    "coherence.r_m": "m",
+    "coherence.Mxx": "m⁻²",
+    "coherence.Mxy": "m⁻²",
+    "coherence.Myy": "m⁻²",
+    "coherence.weight": "1",
+    "depth": "m",
+}
+CompareMode = Literal["abs", "rel", "de2000"]
+COMPARE_MODES: tuple[str, ...] = ("abs", "rel", "de2000")
+
+
+def band_wavelength_nm(channel: str) -> float:
+    """The wavelength (nm) of a spectral channel name ``S0.<λ>nm`` (comma decimal separator)."""
+    if not (channel.startswith(BAND_PREFIX) and channel.endswith("nm")):
+        raise ValueError(f"name: {channel!r} is not a spectral channel S0.<wavelength>nm")
+    return float(channel[len(BAND_PREFIX) : -2].replace(",", "."))
+
+
+def layer_kind(name: str) -> str:
+    """``rgb``, ``band``, ``coherence`` or ``geometry`` (depth, normals, albedo)."""
+    if name in (RGB_LAYER, "R", "G", "B"):
+        return "rgb"
+    if name.startswith(BAND_PREFIX):
+        return "band"
+    if name.startswith("coherence."):
+        return "coherence"
+    return "geometry"
+
+
+def layer_unit(name: str) -> str:
+    kind = layer_kind(name)
+    if kind in ("rgb", "band"):
+        return RADIANCE_UNIT
+    return _UNITS.get(name, "1")
+
+
+@dataclass(frozen=True)
+class LayerInfo:
+    """One displayable layer: its statistics over finite pixels (diagnostics: over covered pixels)."""
+
+    name: str
+    kind: str
+    unit: str
+    wavelength_nm: float | None
+    channels: int
+    min: float | None
+    max: float | None
+    p01: float | None
+    p99: float | None
+
+
+@dataclass
+class DecodedImage:
+    """The channels of one ``image.exr`` as float32 (H, W) arrays, plus derived catalogues."""
+
+    width: int
+    height: int
+    channels: dict[str, np.ndarray]
+    band_names: list[str] = field(default_factory=list)
+    wavelengths_nm: list[float] = field(default_factory=list)
+    _layers: list[LayerInfo] | None = None
+
+    @property
+    def rgb(self) -> np.ndarray:
+        """Linear sRGB, shape (H, W, 3)."""
+        return np.stack([self.channels["R"], self.channels["G"], self.channels["B"]], axis=-1)
+
+    @property
+    def spectrum(self) -> np.ndarray:
+        """Band radiances, shape (H, W, B) in band order (increasing wavelength)."""
+        return np.stack([self.channels[name] for name in self.band_names], axis=-1)
+
+    @property
+    def covered(self) -> np.ndarray:
+        """Pixels that carry coherence diagnostics (``coherence.weight`` > 0)."""
+        weight = self.channels.get("coherence.weight")
+        if weight is None:
+            return np.zeros((self.height, self.width), dtype=bool)
+        return weight > 0
+
+    def layer(self, name: str) -> np.ndarray:
+        """(H, W) float32 for a channel name, (H, W, 3) for ``rgb``; ValueError names unknown layers."""
+        if name == RGB_LAYER:
+            return self.rgb
+        if name not in self.channels:
+            raise ValueError(f"name: no layer {name!r} (see GET /v1/jobs/{{id}}/layers)")
+        return self.channels[name]
+
+    def layers(self) -> list[LayerInfo]:
+        """Catalogue of the layers (computed once)."""
+        if self._layers is None:
+            covered = self.covered
+            names = [RGB_LAYER, *self.band_names]
+            names += [n for n in sorted(self.channels) if n.startswith("coherence.")]
+            names += [n for n in sorted(self.channels) if layer_kind(n) == "geometry"]
+            infos = []
+            for name in names:
+                values = self.layer(name)
+                if layer_kind(name) == "coherence" and name != "coherence.weight":
+                    values = values[covered]
+                values = values[np.isfinite(values)]
+                if values.size:
+                    low, high = (float(v) for v in np.percentile(values, [1.0, 99.0]))
+                    stats = (float(values.min()), float(values.max()), low, high)
+                else:
+                    stats = (None, None, None, None)
+                wavelength = band_wavelength_nm(name) if layer_kind(name) == "band" else None
+                channel_count = 3 if name == RGB_LAYER else 1
+                infos.append(
+                    LayerInfo(name, layer_kind(name), layer_unit(name), wavelength, channel_count, *stats)
+                )
+            self._layers = infos
+        return self._layers
+
+
+def decode_exr(path: Path) -> DecodedImage:
+    """Read every channel of an EXR (first subimage) as float32 (H, W) arrays."""
+    import OpenImageIO as oiio
+
+    image_input = oiio.ImageInput.open(str(path))
+    if image_input is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    try:
+        spec = image_input.spec()
+        pixels = image_input.read_image(format="float")
+    finally:
+        image_input.close()
+    if pixels is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    channels = {name: np.ascontiguousarray(pixels[..., i]) for i, name in enumerate(spec.channelnames)}
+    band_names = sorted((n for n in channels if n.startswith(BAND_PREFIX)), key=band_wavelength_nm)
+    return DecodedImage(
+        width=spec.width,
+        height=spec.height,
+        channels=channels,
+        band_names=band_names,
+        wavelengths_nm=[band_wavelength_nm(n) for n in band_names],
+    )
+
+
+class DecodedImageCache:
+    """LRU cache of decoded ``image.exr`` files keyed by (job id, stored size); thread-safe.
+
+    The size in the key makes a rewritten artifact (a re-run merge) a cache miss; at most
+    ``max_images`` images are kept (a 1024² image with 16 bands is ≈ 120 MB of float32).
+    """
+
+    def __init__(self, store: ArtifactStore, max_images: int = 8) -> None:
+        if max_images < 1:
+            raise ValueError(f"max_images: must be at least 1, got {max_images}")
+        self.store = store
+        self.max_images = max_images
+        self._images: OrderedDict[tuple[str, int], DecodedImage] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, job_id: str) -> DecodedImage:
+        """The job's decoded image; ArtifactNotFoundError while the job has none (not finished)."""
+        key = f"jobs/{job_id}/{IMAGE_ARTIFACT}"
+        listed = [info for info in self.store.list(key) if info.key == key]
+        if not listed:
+            raise ArtifactNotFoundError(IMAGE_ARTIFACT)
+        cache_key = (job_id, listed[0].size_bytes)
+        with self._lock:
+            if cache_key in self._images:
+                self._images.move_to_end(cache_key)
+                return self._images[cache_key]
+        with tempfile.TemporaryDirectory(prefix="hgrender-viewer-") as directory:
+            path = Path(directory) / IMAGE_ARTIFACT
+            self.store.get_file(key, path)
+            image = decode_exr(path)
+        with self._lock:
+            self._images[cache_key] = image
+            self._images.move_to_end(cache_key)
+            while len(self._images) > self.max_images:
+                self._images.popitem(last=False)
+        return image
+
+    def __len__(self) -> int:
+        return len(self._images)
+
+
+# ---- views of one image ----------------------------------------------------------------------------------
+
+
+def _check_step(step: int) -> None:
+    if not 1 <= step <= 64:
+        raise ValueError(f"step: must be between 1 and 64, got {step}")
+
+
+def downsample(values: np.ndarray, step: int, average: bool) -> np.ndarray:
+    """Every ``step``-th pixel (``average``: the mean of each step×step block, partial edge blocks
+    averaged over the pixels they have). Shape (ceil(H/step), ceil(W/step), ...)."""
+    _check_step(step)
+    if step == 1:
+        return values
+    if not average:
+        return values[::step, ::step]
+    height, width = values.shape[:2]
+    rows, cols = math.ceil(height / step), math.ceil(width / step)
+    row_starts, col_starts = np.arange(rows) * step, np.arange(cols) * step
+    sums = np.add.reduceat(np.add.reduceat(values.astype(np.float64), row_starts, axis=0), col_starts, axis=1)
+    counts = np.outer(np.minimum(step, height - row_starts), np.minimum(step, width - col_starts))
+    counts = counts.reshape(rows, cols, *([1] * (values.ndim - 2)))
+    return (sums / counts).astype(np.float32)
+
+
+def layer_array(image: DecodedImage, name: str, step: int = 1) -> np.ndarray:
+    """The layer ``name`` downsampled by ``step`` (float32, (h, w) or (h, w, 3) for ``rgb``)."""
+    values = image.layer(name)
+    return downsample(values, step, average=layer_kind(name) in ("rgb", "band"))
+
+
+def encode_array(values: np.ndarray, dtype: Literal["f16", "f32"]) -> bytes:
+    """Little-endian raw bytes, row-major, channels interleaved."""
+    if dtype not in ("f16", "f32"):
+        raise ValueError(f"format: must be f16 or f32, got {dtype!r}")
+    return np.ascontiguousarray(values, dtype="<f2" if dtype == "f16" else "<f4").tobytes()
+
+
+def pixel_record(image: DecodedImage, x: int, y: int) -> dict[str, object]:
+    """Everything known about pixel (x, y): spectrum, linear RGB, coherence values, depth/normal/albedo."""
+    if not 0 <= x < image.width:
+        raise ValueError(f"x: must be in [0, {image.width - 1}], got {x}")
+    if not 0 <= y < image.height:
+        raise ValueError(f"y: must be in [0, {image.height - 1}], got {y}")
+
+    def value(name: str) -> float | None:
+        channel = image.channels.get(name)
+        if channel is None or not math.isfinite(float(channel[y, x])):
+            return None
+        return float(channel[y, x])
+
+    covered = bool(image.covered[y, x])
+    coherence = {name: value(f"coherence.{name}") if covered else None for name in COHERENCE_LAYERS}
+    return {
+        "x": x,
+        "y": y,
+        "wavelengths_nm": image.wavelengths_nm,
+        "spectrum": [value(name) for name in image.band_names],
+        "spectrum_unit": RADIANCE_UNIT,
+        "rgb": [value(c) for c in "RGB"],
+        "coherence_covered": covered,
+        "coherence": coherence,
+        "coherence_weight": value("coherence.weight"),
+        "depth_m": value("depth"),
+        "normal": [value(f"normal.{a}") for a in "XYZ"],
+        "albedo": [value(f"albedo.{c}") for c in "RGB"],
+    }
+
+
+def display_png(image: DecodedImage, exposure_ev: float, operator: str) -> bytes:
+    """The sRGB image as the viewer shows it (``hgrender.imaging.display_rgb8``), PNG-encoded."""
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(display_rgb8(image.rgb, exposure_ev, operator)).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+def ellipse_grid(image: DecodedImage, spacing_px: int) -> list[dict[str, float]]:
+    """Coherence ellipses on a grid: one per ``spacing_px`` cell that has diagnostics at its centre pixel
+    (x = y = spacing/2 + i·spacing, rounded down), with that pixel's ℓ₁, ℓ₂ (µm), angle (rad) and area
+    (µm²). The ellipse's ℓ₁ axis points along (cos angle, sin angle) with image +y up."""
+    if not 2 <= spacing_px <= 4096:
+        raise ValueError(f"spacing: must be between 2 and 4096 pixels, got {spacing_px}")
+    covered = image.covered
+    grid = []
+    for y in range(spacing_px // 2, image.height, spacing_px):
+        for x in range(spacing_px // 2, image.width, spacing_px):
+            if not covered[y, x]:
+                continue
+            values = {
+                name: float(image.channels[f"coherence.{name}"][y, x])
+                for name in ("l1_um", "l2_um", "angle", "area_um2")
+            }
+            if all(math.isfinite(v) for v in values.values()):
+                grid.append({"x": x, "y": y, **values})
+    return grid
+
+
+# ---- comparing two images --------------------------------------------------------------------------------
+
+
+def _display_lab(linear_rgb: np.ndarray, exposure_ev: float, operator: str) -> np.ndarray:
+    """CIELAB (D65) of what the viewer shows: exposed, tone-mapped display-referred linear sRGB."""
+    displayed = tone_map(linear_rgb * 2.0**exposure_ev, operator)
+    return xyz_to_lab(displayed @ LINEAR_SRGB_TO_XYZ.T, D65_WHITE_XYZ)
+
+
+def difference_map(
+    reference: DecodedImage,
+    sample: DecodedImage,
+    mode: str,
+    exposure_ev: float = 0.0,
+    operator: str = "clamp",
+) -> np.ndarray:
+    """Per-pixel difference of two same-sized images, float32 (H, W).
+
+    * ``abs``: mean over R, G, B of |sample − reference| (linear sRGB radiance units);
+    * ``rel``: mean over R, G, B of |sample − reference| / max(|reference|, ε), ε = 1 % of the
+      reference's mean luminance (keeps black pixels from dividing by zero);
+    * ``de2000``: CIEDE2000 ΔE₀₀ of both images as displayed with the same EV and tone map.
+    """
+    if (reference.width, reference.height) != (sample.width, sample.height):
+        raise ValueError(
+            f"b: image is {sample.width}x{sample.height}, a is {reference.width}x{reference.height};"
+            " compare needs equal sizes"
+        )
+    if not math.isfinite(exposure_ev):
+        raise ValueError(f"ev: must be finite, got {exposure_ev}")
+    rgb_a, rgb_b = reference.rgb.astype(np.float64), sample.rgb.astype(np.float64)
+    if mode == "abs":
+        result = np.mean(np.abs(rgb_b - rgb_a), axis=-1)
+    elif mode == "rel":
+        floor = max(0.01 * float(np.mean(rgb_a @ REC709_LUMINANCE)), np.finfo(np.float32).tiny)
+        result = np.mean(np.abs(rgb_b - rgb_a) / np.maximum(np.abs(rgb_a), floor), axis=-1)
+    elif mode == "de2000":
+        result = ciede2000(
+            _display_lab(rgb_a, exposure_ev, operator), _display_lab(rgb_b, exposure_ev, operator)
+        )
+    else:
+        raise ValueError(f"mode: must be one of {', '.join(COMPARE_MODES)}, got {mode!r}")
+    return result.astype(np.float32)
+
+
+def difference_statistics(values: np.ndarray) -> dict[str, float]:
+    """Mean, 95th percentile and maximum of a difference map."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return {"mean": math.nan, "p95": math.nan, "max": math.nan}
+    return {
+        "mean": float(finite.mean()),
+        "p95": float(np.percentile(finite, 95.0)),
+        "max": float(finite.max()),
+    }

@@ -1,0 +1,202 @@
+"""End to end through the queue with the real renderer: example scenes over HTTP + SSE, chunk/merge
+equivalence, cancel, SIGKILL of a work horse and of a whole worker, and two workers draining 20 jobs.
+
+Scenes are the examples shrunk to 16x16 px and 4 spp (``tiny_scene``); long renders (for cancel and
+kills) use more samples so that the render is still running when the test acts.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from hgrender.client import HgrenderClient
+from service.jobs import JobService
+from service.store import store_from_settings
+from tests.service.conftest import EXAMPLES_DIR, LiveService, tiny_scene, wait_for
+
+pytestmark = pytest.mark.slow
+
+
+def read_exr(path: Path) -> tuple[list[str], np.ndarray, oiio.ImageSpec]:
+    image = oiio.ImageInput.open(str(path))
+    assert image is not None, oiio.geterror()
+    spec = image.spec()
+    pixels = image.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+    image.close()
+    return list(spec.channelnames), np.asarray(pixels), spec
+
+
+def job_service(service: LiveService) -> JobService:
+    return JobService(service.redis, store_from_settings(service.settings), service.settings)
+
+
+def long_scene(spp: int) -> dict[str, Any]:
+    """The Cornell box at 64x64 px with ``spp`` samples: about spp / 700 seconds on 2 shared cores."""
+    return tiny_scene(size_px=64, spp=spp)
+
+
+def wait_until_rendering(client: HgrenderClient, job_id: str, timeout_s: float = 60) -> dict[str, Any]:
+    """Wait until some chunk of the job reported progress > 0 (its render loop is running)."""
+    return wait_for(
+        lambda: (
+            (v := client.get(job_id))["status"] == "running"
+            and any(c["progress"] > 0 for c in v["chunks"])
+            and v
+        ),
+        timeout_s,
+        "the render to start",
+    )
+
+
+@pytest.fixture(scope="module")
+def two_workers(live_service: LiveService) -> LiveService:
+    live_service.start_worker("w1")
+    live_service.start_worker("w2")
+    return live_service
+
+
+def test_example_scenes_end_to_end(two_workers: LiveService, tmp_path: Path) -> None:
+    service = two_workers
+    client = service.client(service.token("eve"))
+    names = sorted(p.name for p in EXAMPLES_DIR.glob("*.json"))
+    assert names, "no example scenes"
+    jobs = {name: client.submit(tiny_scene(name), chunks=2)["id"] for name in names}
+    for name, job_id in jobs.items():
+        events: list[tuple[str, dict[str, Any]]] = []
+        final = client.wait(job_id, on_event=lambda e, d, events=events: events.append((e, d)), timeout_s=300)
+        assert final["status"] == "succeeded", (name, final.get("error"))
+        assert final["progress"] == 1.0 and final["chunks_done"] == 2
+        assert events[0][0] == "status" and events[-1][1]["status"] == "succeeded"
+        progress = [d["progress"] for e, d in events if e == "progress"]
+        assert progress == sorted(progress) and all(0 <= p <= 1 for p in progress)
+        names_listed = {a["name"] for a in client.artifacts(job_id)}
+        assert {"image.exr", "preview.png", "summary.json", "worker.log", "manifest.json"} <= names_listed
+        out_dir = tmp_path / name
+        client.download_all(job_id, out_dir)
+        channels, pixels, spec = read_exr(out_dir / "image.exr")
+        spectral = [c for c in channels if c.startswith("S0.") and c.endswith("nm")]
+        assert spectral and all("," in c for c in spectral)
+        assert {"R", "G", "B", "coherence.l1_um", "coherence.anisotropy"} <= set(channels)
+        assert spec.getattribute("spectralLayoutVersion") == "1.0"
+        assert pixels.shape == (16, 16, len(channels)) and np.isfinite(pixels).all()
+        rgb = pixels[..., [channels.index(c) for c in "RGB"]]
+        assert rgb.max() > 0, f"{name}: black image"
+
+
+def test_four_chunk_job_equals_local_split_render(two_workers: LiveService, tmp_path: Path) -> None:
+    """The service's 4-chunk merge and ``render_scene(..., chunks=4)`` use the same plan (spp split and
+    seeds), so they sum identical samples; only float32 summation order may differ between processes,
+    which bounds the difference by a few ulps of the pixel sums: rtol 1e-5."""
+    from worker.render.api import render_scene
+
+    client = two_workers.client()
+    scene = tiny_scene(spp=8)
+    job_id = client.submit(scene, chunks=4)["id"]
+    final = client.wait(job_id, timeout_s=300)
+    assert final["status"] == "succeeded" and final["chunks_total"] == 4
+    assert {c["spp"] for c in final["chunks"]} == {2}
+    client.download(job_id, "image.exr", tmp_path / "service.exr")
+    render_scene(scene, tmp_path / "local", chunks=4)
+    service_channels, service_pixels, _ = read_exr(tmp_path / "service.exr")
+    local_channels, local_pixels, _ = read_exr(tmp_path / "local" / "image.exr")
+    assert service_channels == local_channels
+    np.testing.assert_allclose(service_pixels, local_pixels, rtol=1e-5, atol=1e-7)
+
+
+def test_cancel_stops_a_running_render_within_5_s(two_workers: LiveService) -> None:
+    client = two_workers.client()
+    job_id = client.submit(long_scene(spp=32768), chunks=1)["id"]
+    wait_until_rendering(client, job_id)
+    jobs = job_service(two_workers)
+    horse_pid = int(jobs.chunk_fields(job_id)["0.pid"])
+    canceled_at = time.monotonic()
+    assert client.cancel(job_id)["status"] == "canceled"
+    wait_for(lambda: not Path(f"/proc/{horse_pid}").exists(), 5.0, "the work horse to stop")
+    assert time.monotonic() - canceled_at < 5.0
+    time.sleep(1.0)
+    view = client.get(job_id)
+    assert view["status"] == "canceled"
+    assert jobs.chunk_completions(job_id) == {}
+    assert not [a for a in client.artifacts(job_id) if a["name"].startswith(("chunks/", "image"))]
+
+
+def _assert_succeeded_exactly_once(
+    service: LiveService, client: HgrenderClient, job_id: str
+) -> dict[str, Any]:
+    final = client.wait(job_id, timeout_s=180)
+    assert final["status"] == "succeeded", final.get("error")
+    completions = job_service(service).chunk_completions(job_id)
+    assert completions == {**{str(i): 1 for i in range(final["chunks_total"])}, "merge": 1}
+    names = [a["name"] for a in client.artifacts(job_id)]
+    assert len(names) == len(set(names))
+    assert sorted(n for n in names if n.startswith("chunks/")) == [
+        f"chunks/{i}.npz" for i in range(final["chunks_total"])
+    ]
+    assert names.count("image.exr") == 1
+    store_root = service.settings.artifact_dir / "jobs" / job_id
+    assert not [p for p in store_root.rglob(".*")], "temporary files left behind"
+    return final
+
+
+def test_sigkill_of_the_work_horse_retries_the_chunk(two_workers: LiveService) -> None:
+    client = two_workers.client()
+    job_id = client.submit(long_scene(spp=2048), chunks=1)["id"]
+    wait_until_rendering(client, job_id)
+    horse_pid = int(job_service(two_workers).chunk_fields(job_id)["0.pid"])
+    os.kill(horse_pid, signal.SIGKILL)
+    final = _assert_succeeded_exactly_once(two_workers, client, job_id)
+    assert final["chunks"][0]["attempts"] == 2
+
+
+def test_sigkill_of_a_whole_worker_is_detected_and_retried(live_service: LiveService) -> None:
+    """The victim worker and its horse die together; the chunk's heartbeat lapses (1 + 3 s) and the
+    surviving worker's maintenance pass (every 2 s) re-queues it."""
+    service = live_service
+    service.stop_workers()
+    service.start_worker("survivor")
+    # The survivor holds RQ's scheduler lock (which moves delayed retries back to the queue).
+    wait_for(lambda: service.redis.exists("rq:scheduler-lock:default"), 30, "the survivor's scheduler")
+    victim = service.start_worker("victim")
+    client = service.client()
+    job_id = client.submit(long_scene(spp=4096), chunks=2)["id"]
+    jobs = job_service(service)
+
+    def victim_chunk() -> str | None:
+        fields = jobs.chunk_fields(job_id)
+        return next((i for i in ("0", "1") if fields.get(f"{i}.worker") == "victim"), None)
+
+    index = wait_for(victim_chunk, 60, "the victim to take a chunk")
+    wait_for(lambda: float(jobs.chunk_fields(job_id).get(f"{index}.progress", 0)) > 0, 60, "victim rendering")
+    horse_pid = int(jobs.chunk_fields(job_id)[f"{index}.pid"])
+    os.killpg(victim.pid, signal.SIGKILL)  # the worker and its scheduler child
+    os.kill(horse_pid, signal.SIGKILL)  # the horse runs in its own process group
+    victim.wait()
+    final = _assert_succeeded_exactly_once(service, client, job_id)
+    assert final["chunks"][int(index)]["attempts"] == 2
+    assert final["chunks"][int(index)]["worker"] == "survivor"
+    service.stop_workers()
+
+
+def test_two_workers_drain_20_jobs_without_running_any_twice(live_service: LiveService) -> None:
+    service = live_service
+    service.stop_workers()
+    client = service.client()
+    job_ids = [client.submit(tiny_scene(size_px=8, spp=1), chunks=1)["id"] for _ in range(20)]
+    service.start_worker("d1")
+    service.start_worker("d2")
+    jobs = job_service(service)
+    for job_id in job_ids:
+        assert client.wait(job_id, timeout_s=240)["status"] == "succeeded"
+        assert jobs.chunk_completions(job_id) == {"0": 1, "merge": 1}
+        assert jobs.chunk_fields(job_id)["0.attempts"] == "1"
+    workers = {w for job_id in job_ids for w in client.get(job_id)["workers"]}
+    assert workers == {"d1", "d2"}
+    service.stop_workers()
