@@ -147,6 +147,11 @@ class MaterialKernels:
             lobe_value, lobe_pdf = self._rough_eval(surface, wi, wo, wavelengths, film)
             value = dr.select(is_this, lobe_value, value)
             pdf = dr.select(is_this, lobe_pdf, pdf)
+        for index, surface in self._per_material(mat.MaterialKind.ROUGH_DIELECTRIC):
+            is_this = active & (material == index) & (wi.z != 0) & (wo.z != 0)
+            d_value, d_pdf = self._rough_dielectric_eval(material, surface, wi, wo, wavelengths)
+            value = dr.select(is_this, d_value, value)
+            pdf = dr.select(is_this, d_pdf, pdf)
         for index, grating in self._per_material(mat.MaterialKind.GRATING):
             is_this = valid & (material == index)
             g_value, g_pdf = self._grating_eval(material, grating, wi, wo, wavelengths, coherence, frame)
@@ -209,6 +214,15 @@ class MaterialKernels:
             delta |= is_this & r_delta
             for slot, term in enumerate(film_terms_out[0]):
                 film_terms[slot] = dr.select(is_this, term, film_terms[slot])
+        for index, surface in self._per_material(mat.MaterialKind.ROUGH_DIELECTRIC):
+            is_this = active & (material == index) & (wi.z != 0)
+            d_wo, d_weight, d_pdf, d_delta = self._rough_dielectric_sample(
+                material, surface, wi, wavelengths, sample1, sample2
+            )
+            wo = dr.select(is_this, d_wo, wo)
+            weight = dr.select(is_this, d_weight, weight)
+            pdf = dr.select(is_this, d_pdf, pdf)
+            delta |= is_this & d_delta
         for index, grating in self._per_material(mat.MaterialKind.GRATING):
             is_this = front & (material == index)
             g_wo, g_weight, g_pdf, g_delta = self._grating_sample(
@@ -230,10 +244,11 @@ class MaterialKernels:
         """
         mi = self.mi
         eta = self.spectrum(material, mat.ETA_ID, wavelengths)[0] / self.param(material, mat.EXTERIOR_IOR)
-        reflectance, cos_t = fresnel_dielectric(wi.z, eta, OPS)
-        reflect = sample1 <= reflectance
+        # η_ti = n_transmitted / n_incident seen from the camera side (inside: the inverse).
         eta_ti = dr.select(wi.z >= 0, eta, dr.rcp(eta))
-        refracted = mi.Vector3f(-wi.x / eta_ti, -wi.y / eta_ti, cos_t)
+        reflectance, cos_t = fresnel_dielectric(wi.z, eta_ti, OPS)
+        reflect = sample1 <= reflectance
+        refracted = mi.Vector3f(-wi.x / eta_ti, -wi.y / eta_ti, -dr.mulsign(cos_t, wi.z))
         wo = dr.select(reflect, mi.reflect(wi), refracted)
         collapse = ~reflect & (self.param(material, mat.DISPERSIVE) > 0.5)
         weight = mi.Spectrum(1.0)
@@ -331,6 +346,156 @@ class MaterialKernels:
         )
         pdf = dr.select(choose_specular, 1.0, lobe_pdf)
         return wo, weight, pdf, choose_specular
+
+    # ---------------------------------------------------------------- rough dielectric (Eq. 15, two sides)
+    def _camera_side(self, material: Any, wi: Any, wavelengths: Any) -> tuple[Any, Any, Any]:
+        """(outside, n_camera, n_other) per wavelength: relative indices of the camera's and the far side."""
+        eta = self.spectrum(material, mat.ETA_ID, wavelengths) / self.param(material, mat.EXTERIOR_IOR)
+        outside = wi.z > 0
+        return outside, dr.select(outside, 1.0, eta), dr.select(outside, eta, 1.0)
+
+    def _rough_dielectric_eval(
+        self, material: Any, surface: rough_surface.RoughSurface, wi: Any, wo: Any, wavelengths: Any
+    ) -> tuple[Any, Any]:
+        """f·|cos θo| and hero-MIS pdf of the rough interface's scattered lobes (light arriving along wo).
+
+        Directions are mirrored so that the camera side is +z. Reflection: the Eq. 15 lobe in the camera's
+        medium with the dielectric Fresnel R; transmission: the Harvey–Shack transmitted lobe with T = 1 − R,
+        evaluated with the light side as the incident medium. The pdf is that of ``_rough_dielectric_sample``
+        (selection probability × lobe density).
+        """
+        mi = self.mi
+        outside, n_camera, n_other = self._camera_side(material, wi, wavelengths)
+        side = dr.select(outside, 1.0, -1.0)
+        view = mi.Vector3f(wi.x, wi.y, wi.z * side)
+        light = mi.Vector3f(wo.x, wo.y, wo.z * side)
+        reflected = light.z > 0
+        value = mi.Spectrum(0.0)
+        pdf_sum = mi.Float(0.0)
+        for j in range(len(wavelengths)):
+            wavelength_m = wavelengths[j] * 1e-9
+            r_view, _ = fresnel_dielectric(view.z, n_other[j] / n_camera[j], OPS)
+            r_light, cos_t_light = fresnel_dielectric(light.z, n_other[j] / n_camera[j], OPS)
+            reflection = rough_surface.rough_reflection_eval(
+                surface, _vec(light), _vec(view), wavelength_m, r_light, OPS, exterior_ior=n_camera[j]
+            )
+            reflection_pdf = rough_surface.rough_reflection_pdf(
+                surface, _vec(view), _vec(light), wavelength_m, OPS, exterior_ior=n_camera[j]
+            )
+            # Transmission with the light's medium as the incident side (its +z is our −z).
+            light_in = (light.x, light.y, -light.z)
+            view_out = (view.x, view.y, -view.z)
+            r_from_light, cos_t_spec = fresnel_dielectric(-light.z, n_camera[j] / n_other[j], OPS)
+            transmission = rough_surface.rough_transmission_eval(
+                surface,
+                light_in,
+                view_out,
+                wavelength_m,
+                1.0 - r_from_light,
+                cos_t_spec,
+                OPS,
+                exterior_ior=n_other[j],
+                interior_ior=n_camera[j],
+            )
+            transmission_pdf = rough_surface.rough_transmission_pdf(
+                surface,
+                _vec(view),
+                (light.x, light.y, light.z),
+                wavelength_m,
+                OPS,
+                exterior_ior=n_camera[j],
+                interior_ior=n_other[j],
+            )
+            del cos_t_light
+            value[j] = dr.select(reflected, reflection, transmission) * dr.abs(light.z)
+            pdf_sum += dr.select(reflected, r_view * reflection_pdf, (1.0 - r_view) * transmission_pdf)
+        return value, pdf_sum / len(wavelengths)
+
+    def _rough_dielectric_sample(
+        self,
+        material: Any,
+        surface: rough_surface.RoughSurface,
+        wi: Any,
+        wavelengths: Any,
+        sample1: Any,
+        sample2: Any,
+    ) -> tuple[Any, Any, Any, Any]:
+        """Reflect with probability R(λ_hero) else transmit; within each, the specular (delta) part with
+        probability e^{−g}, else an exact PSD-lobe sample. Dispersive media keep the hero wavelength only
+        after a specular refraction (as the smooth dielectric does); radiance scales by (n_camera/n_light)²
+        across the interface."""
+        mi = self.mi
+        outside, n_camera, n_other = self._camera_side(material, wi, wavelengths)
+        side = dr.select(outside, 1.0, -1.0)
+        view = mi.Vector3f(wi.x, wi.y, wi.z * side)
+        hero_m = wavelengths[0] * 1e-9
+        eta_hero = n_other[0] / n_camera[0]
+        reflectance_hero, cos_t_hero = fresnel_dielectric(view.z, eta_hero, OPS)
+        reflect = sample1 < reflectance_hero
+        u = dr.select(
+            reflect,
+            sample1 / dr.maximum(reflectance_hero, 1e-12),
+            (sample1 - reflectance_hero) / dr.maximum(1.0 - reflectance_hero, 1e-12),
+        )
+        u = dr.clip(u, 0.0, 0.999999)
+        g_reflect = rough_surface.roughness_exponent(surface.rms_height_m, view.z, hero_m, n_camera[0])
+        g_transmit = rough_surface.transmission_roughness_exponent(
+            surface.rms_height_m, view.z, cos_t_hero, hero_m, n_camera[0], n_other[0]
+        )
+        specular_probability = dr.exp(-dr.select(reflect, g_reflect, g_transmit))
+        specular = u < specular_probability
+        u_lobe = dr.clip(
+            (u - specular_probability) / dr.maximum(1.0 - specular_probability, 1e-12), 0.0, 0.999999
+        )
+        lobe_r, _, valid_r = rough_surface.rough_reflection_sample(
+            surface, _vec(view), hero_m, u_lobe, sample2[0], OPS, exterior_ior=n_camera[0]
+        )
+        lobe_t, _, valid_t = rough_surface.rough_transmission_sample(
+            surface,
+            _vec(view),
+            hero_m,
+            u_lobe,
+            sample2[0],
+            OPS,
+            exterior_ior=n_camera[0],
+            interior_ior=n_other[0],
+        )
+        lobe = mi.Vector3f(*(dr.select(reflect, a, b) for a, b in zip(lobe_r, lobe_t, strict=True)))
+        lobe_valid = dr.select(reflect, valid_r, valid_t)
+        refracted = mi.Vector3f(-view.x / eta_hero, -view.y / eta_hero, -cos_t_hero)
+        specular_dir = dr.select(reflect, mi.reflect(view), refracted)
+        local = dr.select(specular, specular_dir, lobe)
+        wo = mi.Vector3f(local.x, local.y, local.z * side)
+        # Lobe sample: the estimator's weight is value / pdf of the same formulation as eval_pdf.
+        lobe_value, lobe_pdf = self._rough_dielectric_eval(material, surface, wi, wo, wavelengths)
+        lobe_weight = lobe_value / dr.maximum(lobe_pdf * (1.0 - specular_probability), 1e-20)
+        # Specular sample: R e^{−g} (or T e^{−g_t} with the radiance factor) over its selection probability.
+        specular_weight = mi.Spectrum(0.0)
+        for j in range(len(wavelengths)):
+            wavelength_m = wavelengths[j] * 1e-9
+            eta_j = n_other[j] / n_camera[j]
+            r_j, cos_t_j = fresnel_dielectric(view.z, eta_j, OPS)
+            g_r = rough_surface.roughness_exponent(surface.rms_height_m, view.z, wavelength_m, n_camera[j])
+            g_t = rough_surface.transmission_roughness_exponent(
+                surface.rms_height_m, view.z, cos_t_j, wavelength_m, n_camera[j], n_other[j]
+            )
+            reflected_part = r_j * dr.exp(-g_r) / dr.maximum(reflectance_hero * specular_probability, 1e-20)
+            transmitted_part = (
+                (1.0 - r_j)
+                * dr.exp(-g_t)
+                * dr.square(n_camera[j] / n_other[j])
+                / dr.maximum((1.0 - reflectance_hero) * specular_probability, 1e-20)
+            )
+            specular_weight[j] = dr.select(reflect, reflected_part, transmitted_part)
+        collapse = specular & ~reflect & (self.param(material, mat.DISPERSIVE) > 0.5)
+        specular_weight[0] = dr.select(collapse, specular_weight[0] * len(wavelengths), specular_weight[0])
+        for j in range(1, len(wavelengths)):
+            specular_weight[j] = dr.select(collapse, 0.0, specular_weight[j])
+        weight = dr.select(
+            specular, specular_weight, dr.select(lobe_valid & (lobe_pdf > 0), lobe_weight, 0.0)
+        )
+        pdf = dr.select(specular, 1.0, lobe_pdf)
+        return wo, weight, pdf, specular
 
     # ---------------------------------------------------------------- grating (Eq. 20)
     def _grating_axes(self, material: Any, frame: Any) -> tuple[Any, Any]:

@@ -321,7 +321,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # --- shading frame (two-sided except for dielectrics)
             frame = mi.Frame3f(si.sh_frame)
             wi_world = -ray.d
-            flip = (dr.dot(wi_world, frame.n) < 0) & (kind != int(mat.MaterialKind.DIELECTRIC))
+            two_sided = (kind != int(mat.MaterialKind.DIELECTRIC)) & (
+                kind != int(mat.MaterialKind.ROUGH_DIELECTRIC)
+            )
+            flip = (dr.dot(wi_world, frame.n) < 0) & two_sided
             frame.n = dr.select(flip, -frame.n, frame.n)
             frame.t = dr.select(flip, -frame.t, frame.t)
             wi = frame.to_local(wi_world)

@@ -160,6 +160,10 @@ class SceneCompiler:
         if kind == "rough_conductor":
             conductor(material.conductor)
             return mat.MaterialRecord(mat.MaterialKind.ROUGH_CONDUCTOR, values, rough(material)), placeholder
+        if kind == "rough_dielectric":
+            dielectric(material.ior)
+            values[mat.EXTERIOR_IOR] = material.exterior_ior
+            return mat.MaterialRecord(mat.MaterialKind.ROUGH_DIELECTRIC, values, rough(material)), placeholder
         if kind == "thin_film":
             values[mat.FILM_THICKNESS_M] = material.film_thickness_um * 1e-6
             values[mat.FILM_IOR_ID] = spectra_table.add(_ior_on_grid(material.film_ior, grid)[0])
