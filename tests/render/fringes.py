@@ -83,4 +83,4 @@ def fit_fringe_visibility(
     dof = len(ratio) - basis.shape[1]
     covariance = np.linalg.inv(basis.T @ basis) * float(residual @ residual) / dof
     trend = float(np.mean(basis[:, :3] @ coefficients[:3]))
-    return FringeFit(coefficients[3] / trend, float(np.sqrt(covariance[3, 3])) / abs(trend))
+    return FringeFit(float(coefficients[3]) / trend, float(np.sqrt(covariance[3, 3])) / abs(trend))
