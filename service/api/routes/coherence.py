@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter
 from pydantic import BaseModel, ConfigDict, Field
@@ -12,6 +12,10 @@ from service.models import Problem
 from worker.optics.calculator import coherence_at
 
 router = APIRouter(prefix="/v1", tags=["coherence"])
+
+# Bounds keep every intermediate (k/r)²Σ finite in float64; far beyond any scene's scale.
+MAX_SIZE_M = 1e4
+MAX_DISTANCE_M = 1e12
 
 
 class CoherenceRequest(BaseModel):
@@ -25,15 +29,17 @@ class CoherenceRequest(BaseModel):
     )
 
     source: Literal["sphere", "cylinder", "disk", "rect", "gaussian"]
-    radius_m: float | None = Field(None, gt=0, description="sphere, disk, cylinder")
-    length_m: float | None = Field(None, gt=0, description="cylinder")
-    width_m: float | None = Field(None, gt=0, description="rect")
-    height_m: float | None = Field(None, gt=0, description="rect")
-    sigma_m: float | None = Field(None, gt=0, description="gaussian")
-    distance_m: float = Field(gt=0, description="Propagation distance r (m).")
+    radius_m: float | None = Field(None, gt=0, le=MAX_SIZE_M, description="sphere, disk, cylinder")
+    length_m: float | None = Field(None, gt=0, le=MAX_SIZE_M, description="cylinder")
+    width_m: float | None = Field(None, gt=0, le=MAX_SIZE_M, description="rect")
+    height_m: float | None = Field(None, gt=0, le=MAX_SIZE_M, description="rect")
+    sigma_m: float | None = Field(None, gt=0, le=MAX_SIZE_M, description="gaussian")
+    distance_m: float = Field(gt=0, le=MAX_DISTANCE_M, description="Propagation distance r (m).")
     wavelength_nm: float = Field(550.0, ge=200, le=2500)
-    axis: list[float] = Field([1.0, 0.0, 0.0], min_length=3, max_length=3)
-    direction: list[float] = Field([0.0, 0.0, 1.0], min_length=3, max_length=3)
+    axis: list[Annotated[float, Field(ge=-1e6, le=1e6)]] = Field([1.0, 0.0, 0.0], min_length=3, max_length=3)
+    direction: list[Annotated[float, Field(ge=-1e6, le=1e6)]] = Field(
+        [0.0, 0.0, 1.0], min_length=3, max_length=3
+    )
     modes: int = Field(1, ge=1, le=16)
 
 

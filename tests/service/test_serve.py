@@ -1,0 +1,121 @@
+"""``hgrender serve`` as users run it (a subprocess with its private Redis), restarted with queued jobs,
+and the CLI client commands against it."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from hgrender.cli import main as hgrender_main
+from hgrender.client import HgrenderClient
+from service.redis_server import free_loopback_port
+from tests.service.conftest import EXAMPLES_DIR, tiny_scene, wait_for
+
+pytestmark = pytest.mark.slow
+
+
+def start_serve(data_dir: Path, port: int, workers: int) -> subprocess.Popen[bytes]:
+    env = {k: v for k, v in os.environ.items() if k != "REDIS_URL" and not k.startswith("HGRENDER_")}
+    command = [
+        sys.executable,
+        "-c",
+        "import sys; from hgrender.cli import main; sys.exit(main())",
+        "serve",
+        "--port",
+        str(port),
+        "--data-dir",
+        str(data_dir),
+        "--workers",
+        str(workers),
+    ]
+    log = (data_dir.parent / f"serve-{port}.log").open("wb")
+    process = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+
+    def ready() -> bool:
+        if process.poll() is not None:
+            pytest.fail(f"hgrender serve exited: {(data_dir.parent / f'serve-{port}.log').read_text()}")
+        try:
+            return httpx.get(f"http://127.0.0.1:{port}/readyz", timeout=1).status_code == 200
+        except httpx.HTTPError:
+            return False
+
+    wait_for(ready, 60, "hgrender serve to become ready", interval_s=0.2)
+    return process
+
+
+def stop_serve(process: subprocess.Popen[bytes]) -> None:
+    process.send_signal(signal.SIGTERM)
+    process.wait(timeout=60)
+
+
+def test_serve_restart_keeps_queued_jobs_and_cli_works(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data_dir = tmp_path / "data"
+    port = free_loopback_port()
+    first = start_serve(data_dir, port, workers=0)  # no workers: jobs stay queued
+    try:
+        token_file = data_dir / "admin.token"
+        assert stat.S_IMODE(token_file.stat().st_mode) == 0o600
+        token = token_file.read_text().strip()
+        with HgrenderClient(f"http://127.0.0.1:{port}", token) as client:
+            job_ids = [client.submit(tiny_scene(), chunks=2)["id"] for _ in range(3)]
+            assert {client.get(j)["status"] for j in job_ids} == {"queued"}
+    finally:
+        stop_serve(first)
+    assert (data_dir / "redis" / "appendonlydir").is_dir()
+
+    port = free_loopback_port()
+    second = start_serve(data_dir, port, workers=1)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        assert token_file.read_text().strip() == token  # the first admin token is kept
+        with HgrenderClient(url, token) as client:
+            for job_id in job_ids:  # none lost across the restart
+                assert client.wait(job_id, timeout_s=180)["status"] == "succeeded"
+        common = ["--url", url, "--data-dir", str(data_dir)]
+        capsys.readouterr()
+        assert hgrender_main(["token", "create", "--owner", "zoe", "--scopes", "submit,read", *common]) == 0
+        zoe_token = capsys.readouterr().out.strip()
+        zoe = ["--url", url, "--token", zoe_token]
+        scene_file = tmp_path / "scene.json"
+        scene_file.write_text(json.dumps(tiny_scene()))
+        assert hgrender_main(["submit", str(scene_file), "--wait", "--spp", "2", *zoe]) == 0
+        out = capsys.readouterr().out.strip().splitlines()
+        job_id = out[0]
+        assert json.loads(out[-1])["status"] == "succeeded"
+        assert hgrender_main(["status", job_id, *zoe]) == 0
+        assert json.loads(capsys.readouterr().out)["spp"] == 2
+        assert hgrender_main(["list", *zoe]) == 0
+        listed = capsys.readouterr().out.strip().splitlines()
+        assert len(listed) == 1 and listed[0].startswith(job_id)  # zoe sees only her own job
+        assert hgrender_main(["download", job_id, "-o", str(tmp_path / "out"), *zoe]) == 0
+        assert (tmp_path / "out" / "image.exr").stat().st_size > 0
+        assert hgrender_main(["cancel", job_id, *zoe]) == 2  # already succeeded: 409, reported
+        assert "409" in capsys.readouterr().err
+        assert sorted(EXAMPLES_DIR.glob("*.json"))
+    finally:
+        stop_serve(second)
+    # Both serve runs stopped their private Redis.
+    deadline = time.monotonic() + 10
+    while (
+        time.monotonic() < deadline
+        and "redis-server"
+        in subprocess.run(["pgrep", "-af", str(data_dir / "redis")], capture_output=True, text=True).stdout
+    ):
+        time.sleep(0.2)
+    assert (
+        "redis-server"
+        not in subprocess.run(
+            ["pgrep", "-af", str(data_dir / "redis")], capture_output=True, text=True
+        ).stdout
+    )
