@@ -46,6 +46,7 @@ class IncidentCoherence:
     distance_m: Any
     frame_x: Any  # world-space unit vectors spanning the transverse plane
     frame_y: Any
+    rect_source: Any = False  # True where the source expands like a uniform rectangle (Eq. 14)
 
 
 def _vec(v: Any) -> tuple[Any, Any, Any]:

@@ -85,6 +85,14 @@ def emitter_direction(mi: Any, table: Any, emitter_index: Any, receiver: Any) ->
     return distance, direction
 
 
+def emitter_is_rect(mi: Any, table: Any, emitter_index: Any) -> Any:
+    """Whether the emitter's angular coherence expands like a uniform rectangle (rectangles, cylinders)."""
+    import drjit as dr
+
+    kind = mi.UInt32(dr.gather(mi.Float, table, emitter_index * STRIDE + KIND))
+    return (kind == int(EmitterKind.RECTANGLE)) | (kind == int(EmitterKind.CYLINDER))
+
+
 def emitter_coherence(
     mi: Any,
     table: Any,

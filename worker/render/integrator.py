@@ -39,7 +39,7 @@ from worker.optics.coherence import degree_of_coherence
 from worker.optics.frames import transverse_frame_components
 from worker.render import materials as mat
 from worker.render.bsdfs import IncidentCoherence, MaterialKernels, combine_film_terms
-from worker.render.emitters import emitter_coherence, emitter_direction
+from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect
 from worker.render.spectral import LAMBDA_REFERENCE_NM, BandLayout
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
@@ -61,8 +61,12 @@ class RenderContext:
     emitter_flat: Any  # mi.Float
     emitter_index: Any  # mi.UInt32: emitter registry id -> emitter record
     emitter_kinds: set
-    coefficients: dict  # (n, m) -> ĉ of the universal source expansion used for visibilities
+    # (n, m) -> ĉ of the universal expansions (Eq. 14) used for visibilities: uniform disks (spheres, disks,
+    # scattering regions) and uniform rectangles (rectangles, cylinders seen side-on).
+    disk_coefficients: dict
+    rect_coefficients: dict
     black_material: int  # index of the absorbing material (emitters, misses)
+    rect_sources: bool  # whether any emitter is a rectangle or a cylinder
     camera_right: Any  # world-space unit vectors of the image's +x and +y (up) directions
     camera_up: Any
 
@@ -122,10 +126,18 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         sigma = (coherence.sigma_xx, coherence.sigma_xy, coherence.sigma_yy)
         result = mi.Spectrum(0.0)
         distance = dr.maximum(coherence.distance_m, 1e-9)
+        context = self.context
+        # With one mode both expansions are the same Gaussian: evaluate the rectangle's only when it differs.
+        needs_rect = context.rect_coefficients != context.disk_coefficients and bool(context.rect_sources)
         for j in range(len(wavelengths)):
-            result[j] = degree_of_coherence(
-                xi, sigma, distance, wavelengths[j] * 1e-9, self.context.coefficients, OPS
-            )
+            wavelength_m = wavelengths[j] * 1e-9
+            mu = degree_of_coherence(xi, sigma, distance, wavelength_m, context.disk_coefficients, OPS)
+            if needs_rect:
+                mu_rect = degree_of_coherence(
+                    xi, sigma, distance, wavelength_m, context.rect_coefficients, OPS
+                )
+                mu = dr.select(coherence.rect_source, mu_rect, mu)
+            result[j] = mu
         return result
 
     def _frame_for(self, direction: Any) -> tuple[Any, Any]:
@@ -280,7 +292,15 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
             src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
             src_yy = dr.select(hit_emitter, em_syy, sr_yy)
-            resolved = IncidentCoherence(src_xx, src_xy, src_yy, chain_distance, frame_x, frame_y)
+            resolved = IncidentCoherence(
+                src_xx,
+                src_xy,
+                src_yy,
+                chain_distance,
+                frame_x,
+                frame_y,
+                hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
+            )
             if has_film:
                 film_factor = combine_film_terms(
                     film_terms,
@@ -347,7 +367,15 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 nee_fx,
                 nee_fy,
             )
-            nee_coherence = IncidentCoherence(nee_sxx, nee_sxy, nee_syy, nee_r, nee_fx, nee_fy)
+            nee_coherence = IncidentCoherence(
+                nee_sxx,
+                nee_sxy,
+                nee_syy,
+                nee_r,
+                nee_fx,
+                nee_fy,
+                emitter_is_rect(mi, self.context.emitter_flat, em_record_nee),
+            )
             wo_em = frame.to_local(ds_em.d)
             # Coherence-sensitive lobes (gratings) are evaluated towards the emitter's centre (BRIEF).
             wo_eval = wo_em

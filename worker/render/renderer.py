@@ -19,6 +19,7 @@ import numpy as np
 
 from worker.mitsuba_setup import load_mitsuba
 from worker.optics.sources import source_coefficients
+from worker.render.emitters import EmitterKind
 from worker.render.integrator import HGPathIntegrator, RenderContext, register
 from worker.render.scene_compiler import CompiledScene
 
@@ -128,7 +129,9 @@ class Renderer:
             emitter_index=mi.UInt32(emitter_index),
             emitter_kinds=kinds,
             black_material=len(compiled.material_table.records) - 1,
-            coefficients=source_coefficients("disk", compiled.scene.film.modes),
+            disk_coefficients=source_coefficients("disk", compiled.scene.film.modes),
+            rect_coefficients=source_coefficients("rect", compiled.scene.film.modes),
+            rect_sources=bool(kinds & {EmitterKind.RECTANGLE, EmitterKind.CYLINDER}),
             camera_right=mi.Vector3f(*right),
             camera_up=mi.Vector3f(*up),
         )
