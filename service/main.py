@@ -19,6 +19,7 @@ from schemas import SceneLimits
 from service.api.errors import install_exception_handlers
 from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware
 from service.api.routes import coherence, health, jobs, schemas, tokens
+from service.api.routes import schedules as regression_routes
 from service.auth import TokenRegistry
 from service.core.config import Settings
 from service.jobs import JobService
@@ -56,6 +57,7 @@ def create_app(settings: Settings) -> FastAPI:
             {"name": "schemas", "description": "Scene schema."},
             {"name": "tokens", "description": "API tokens (admin)."},
             {"name": "health", "description": "Liveness, readiness, metrics."},
+            {"name": "regression", "description": "Regression schedules, runs and baselines."},
         ],
     )
     client = redis.Redis.from_url(settings.redis_url, health_check_interval=30)
@@ -72,6 +74,7 @@ def create_app(settings: Settings) -> FastAPI:
     install_exception_handlers(app)
     for router in (jobs.router, coherence.router, schemas.router, tokens.router, health.router):
         app.include_router(router)
+    app.include_router(regression_routes.router)
     # The last added is outermost: latency also times the 413s the size limit answers before routing.
     app.add_middleware(BodySizeLimitMiddleware, max_bytes=settings.max_request_bytes)
     app.add_middleware(LatencyMiddleware, histogram=latency)

@@ -67,12 +67,32 @@ class Settings(BaseSettings):
         24 * 3600, gt=0, description="How long an `idempotency_key` is remembered."
     )
     progress_interval_s: float = Field(0.25, gt=0, description="Least interval between progress events.")
+    regression_scheduler: bool = Field(
+        True, description="`hgrender serve` runs the regression scheduler (leader-elected, so one fires)."
+    )
+    regression_misfire_grace_s: int = Field(
+        3600, ge=1, description="Due regression runs later than this (scheduler down) are skipped, not run."
+    )
+    regression_leader_ttl_s: float = Field(
+        10.0, gt=0, description="Leader lease (s): a standby scheduler takes over within this after a crash."
+    )
+    regression_webhook_retry_intervals_s: list[float] = Field(
+        default_factory=lambda: [2.0, 10.0, 60.0], description="Backoff before failure-webhook retries (s)."
+    )
+    regression_webhook_timeout_s: float = Field(10.0, gt=0, description="Timeout of one webhook POST (s).")
 
     @field_validator("chunk_retry_intervals_s")
     @classmethod
     def _intervals_non_negative(cls, value: list[int]) -> list[int]:
         if any(v < 0 for v in value):
             raise ValueError("chunk_retry_intervals_s: intervals must be >= 0 seconds")
+        return value
+
+    @field_validator("regression_webhook_retry_intervals_s")
+    @classmethod
+    def _webhook_intervals_non_negative(cls, value: list[float]) -> list[float]:
+        if any(v < 0 for v in value):
+            raise ValueError("regression_webhook_retry_intervals_s: intervals must be >= 0 seconds")
         return value
 
     @model_validator(mode="after")

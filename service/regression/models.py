@@ -184,6 +184,8 @@ class RunView(BaseModel):
     status: Literal["running", "passed", "failed", "error"]
     reasons: list[str] = Field(default_factory=list)
     scenes: list[SceneResult]
+    suite: Suite | None = Field(None, description="The suite as it was when the run started.")
+    webhook_url: str | None = None
     webhook: dict[str, Any] | None = Field(None, description="Delivery outcome of the failure webhook.")
 
 

@@ -1,0 +1,184 @@
+"""``hgrender regress SUITE`` (local regression check for CI) and ``hgrender scheduler`` (the service's
+regression scheduler as its own process).
+
+``regress`` renders every scene of a suite file (JSON, or YAML for ``.yaml``/``.yml``; the format of
+``service.regression.models.Suite``, see docs/regression.md) locally with ``worker.render.api.render_scene``
+(no service needed), compares each with its baseline in ``--baseline DIR`` (``DIR/<scene>/image.exr`` and
+``variance.exr``) using the service's noise-aware metrics, prints a table and exits 1 if any scene failed
+or could not be compared (0 otherwise). ``--update-baseline`` writes the new renders as the baselines after
+comparing; ``--junit FILE`` writes a JUnit XML report (one test case per scene).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+from hgrender.cli import CliError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    regress = subparsers.add_parser(
+        "regress", help="render a regression suite locally and compare with baselines"
+    )
+    regress.add_argument("suite", type=Path, help="suite file (.json, .yaml, .yml)")
+    regress.add_argument(
+        "--baseline", type=Path, default=None, help="baseline directory (default: <suite dir>/baselines)"
+    )
+    regress.add_argument("--update-baseline", action="store_true", help="store the new renders as baselines")
+    regress.add_argument("--junit", type=Path, default=None, help="write a JUnit XML report here")
+    regress.add_argument("--seed", type=int, default=None, help="base seed (default: random)")
+    regress.add_argument("--work-dir", type=Path, default=None, help="keep the renders here")
+    regress.set_defaults(handler=regress_command)
+
+    scheduler = subparsers.add_parser("scheduler", help="run the regression scheduler against REDIS_URL")
+    scheduler.add_argument("--name", default=None, help="scheduler name (default: random)")
+    scheduler.set_defaults(handler=scheduler_command)
+
+
+def load_suite(path: Path) -> Any:
+    """The suite file parsed and validated (``service.regression.models.Suite``)."""
+    from pydantic import ValidationError
+
+    from service.regression.models import Suite
+
+    if not path.is_file():
+        raise CliError(f"suite: {path} is not a file")
+    text = path.read_text()
+    if path.suffix.lower() in (".yaml", ".yml"):
+        import yaml
+
+        data = yaml.safe_load(text)
+    else:
+        data = json.loads(text)
+    try:
+        return Suite.model_validate(data)
+    except ValidationError as error:
+        first = error.errors()[0]
+        location = ".".join(str(part) for part in first["loc"]) or "suite"
+        raise CliError(f"suite: {location}: {first['msg']}") from None
+
+
+def _copy_outputs(source: Path, destination: Path) -> None:
+    destination.mkdir(parents=True, exist_ok=True)
+    for name in ("image.exr", "variance.exr", "summary.json"):
+        temporary = destination / f".{name}.tmp"
+        shutil.copyfile(source / name, temporary)
+        os.replace(temporary, destination / name)
+
+
+def run_suite(
+    suite: Any, baseline_dir: Path, work_dir: Path, seed: int, update_baseline: bool
+) -> list[dict[str, Any]]:
+    """Render, compare and (optionally) update the baselines; one result dict per scene."""
+    from service.regression.images import load_render_outputs
+    from service.regression.metrics import compare_renders
+    from service.regression.runs import resolve_scene
+    from worker.render.api import render_scene
+
+    results = []
+    for entry in suite.scenes:
+        current_dir = work_dir / entry.key
+        result: dict[str, Any] = {"scene": entry.key, "verdict": "error", "reasons": [], "metrics": {}}
+        try:
+            render_scene(resolve_scene(entry, seed), current_dir)
+            baseline = baseline_dir / entry.key
+            if (baseline / "image.exr").is_file():
+                comparison = compare_renders(
+                    entry.key,
+                    load_render_outputs(baseline),
+                    load_render_outputs(current_dir),
+                    suite.thresholds_for(entry),
+                )
+                result.update(
+                    verdict=comparison.verdict, reasons=comparison.reasons, metrics=comparison.metrics
+                )
+            elif update_baseline:
+                result.update(verdict="pass", reasons=[], metrics={"baseline_created": True})
+            else:
+                result["reasons"] = [f"{entry.key}: no baseline in {baseline} (run with --update-baseline)"]
+            if update_baseline:
+                _copy_outputs(current_dir, baseline)
+        except ValueError as error:
+            result["reasons"] = [f"{entry.key}: {error}"]
+        results.append(result)
+    return results
+
+
+def format_table(results: list[dict[str, Any]]) -> str:
+    """A fixed-width table: scene, verdict, worst band rel. RMSE, ΔE00 p95, worst coherence drift, reason."""
+    header = f"{'scene':<28} {'verdict':<7} {'rel_rmse':>9} {'dE00_p95':>9} {'coh_drift':>10}  reason"
+    lines = [header, "-" * len(header)]
+    for result in results:
+        metrics = result["metrics"]
+        drift = [abs(v["median_rel_change"]) for v in metrics.get("coherence", {}).values()]
+        rel_rmse = metrics.get("rel_rmse_max")
+        delta_e = metrics.get("delta_e00", {}).get("p95")
+        lines.append(
+            f"{result['scene']:<28} {result['verdict']:<7} "
+            f"{'' if rel_rmse is None else f'{rel_rmse:.4f}':>9} "
+            f"{'' if delta_e is None else f'{delta_e:.3f}':>9} "
+            f"{'' if not drift else f'{max(drift):.4f}':>10}  "
+            f"{'; '.join(result['reasons'])}"
+        )
+    return "\n".join(lines)
+
+
+def junit_xml(suite_name: str, results: list[dict[str, Any]]) -> bytes:
+    """JUnit XML: a ``testcase`` per scene, with ``<failure>`` if it failed, ``<error>`` if not compared."""
+    failures = sum(1 for r in results if r["verdict"] == "fail")
+    errors = sum(1 for r in results if r["verdict"] == "error")
+    testsuite = ET.Element(
+        "testsuite", name=suite_name, tests=str(len(results)), failures=str(failures), errors=str(errors)
+    )
+    for result in results:
+        case = ET.SubElement(
+            testsuite, "testcase", classname=f"hgrender.regress.{suite_name}", name=result["scene"]
+        )
+        if result["verdict"] in ("fail", "error"):
+            tag = "failure" if result["verdict"] == "fail" else "error"
+            element = ET.SubElement(case, tag, message="; ".join(result["reasons"]))
+            element.text = json.dumps(result["metrics"], indent=1, default=float)
+    return ET.tostring(ET.ElementTree(testsuite).getroot(), encoding="utf-8", xml_declaration=True)
+
+
+def regress_command(args: argparse.Namespace) -> int:
+    suite = load_suite(args.suite)
+    baseline_dir = args.baseline if args.baseline is not None else args.suite.parent / "baselines"
+    seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "little") & 0x7FFFFFFF
+    with tempfile.TemporaryDirectory(prefix="hgrender-regress-") as tmp:
+        work_dir = args.work_dir if args.work_dir is not None else Path(tmp)
+        results = run_suite(suite, baseline_dir, work_dir, seed, args.update_baseline)
+    print(format_table(results))
+    if args.junit is not None:
+        args.junit.parent.mkdir(parents=True, exist_ok=True)
+        temporary = args.junit.with_name(f".{args.junit.name}.tmp")
+        temporary.write_bytes(junit_xml(args.suite.stem, results))
+        os.replace(temporary, args.junit)
+    failed = [r for r in results if r["verdict"] != "pass"]
+    print(f"{len(results) - len(failed)} of {len(results)} scenes passed", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def scheduler_command(args: argparse.Namespace) -> int:
+    import logging
+
+    from service.core.config import Settings
+    from service.regression.scheduler import RegressionScheduler
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    scheduler = RegressionScheduler(Settings(), name=args.name)
+    signal.signal(signal.SIGTERM, lambda *_: scheduler.stop_event.set())
+    try:
+        scheduler.run()
+    except KeyboardInterrupt:
+        scheduler.stop_event.set()
+    return 0
