@@ -18,7 +18,7 @@ from hgrender import __version__
 from schemas import SceneLimits
 from service.api.errors import install_exception_handlers
 from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware
-from service.api.routes import coherence, health, jobs, schemas, tokens
+from service.api.routes import coherence, health, jobs, schemas, tokens, viewer, web
 from service.api.routes import schedules as regression_routes
 from service.auth import TokenRegistry
 from service.core.config import Settings
@@ -75,6 +75,8 @@ def create_app(settings: Settings) -> FastAPI:
     for router in (jobs.router, coherence.router, schemas.router, tokens.router, health.router):
         app.include_router(router)
     app.include_router(regression_routes.router)
+    viewer.install(app)  # viewer data routes and their decoded-image cache
+    web.install(app)  # the browser viewer at /
     # The last added is outermost: latency also times the 413s the size limit answers before routing.
     app.add_middleware(BodySizeLimitMiddleware, max_bytes=settings.max_request_bytes)
     app.add_middleware(LatencyMiddleware, histogram=latency)

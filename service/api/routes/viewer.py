@@ -1,0 +1,292 @@
+"""Viewer data endpoints: layer catalogue, raw float arrays of one layer, pixel records, the server-side
+display image, coherence-ellipse grids, two-job differences and the example scenes of the submit form.
+
+Thin: the work is in ``service.viewer_data``; decoding runs in the thread pool. Same authentication and
+ownership rules as ``/v1/jobs`` (another owner's job is a 404). ``install(app)`` adds the router and the
+decoded-image cache (``app.state.viewer_images``).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path as FilePath
+from typing import Annotated, Any
+
+from fastapi import APIRouter, FastAPI, Path, Query, Response
+from pydantic import BaseModel, Field
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import Request
+
+import schemas
+from hgrender.imaging import TONE_MAPS
+from service.api.deps import JobsDep, Reader, visible_job
+from service.api.routes.jobs import _ERRORS, JobId
+from service.jobs import JobConflictError
+from service.models import JobStatus, Problem
+from service.store.base import ArtifactNotFoundError
+from service.viewer_data import (
+    COMPARE_MODES,
+    DecodedImage,
+    DecodedImageCache,
+    LayerInfo,
+    difference_map,
+    difference_statistics,
+    display_png,
+    ellipse_grid,
+    encode_array,
+    layer_array,
+    pixel_record,
+)
+
+router = APIRouter(tags=["viewer"])
+EXAMPLES_DIR = FilePath(schemas.__file__).parent / "examples"
+_IMAGE_ERRORS: dict[int | str, dict[str, Any]] = {
+    **_ERRORS,
+    409: {"model": Problem, "description": "The job has no image yet (not finished)."},
+    422: {"model": Problem, "description": "Invalid parameter."},
+}
+_RAW = {200: {"content": {"application/octet-stream": {}}, "description": "Little-endian floats."}}
+ExposureEV = Annotated[float, Query(ge=-64, le=64, description="Exposure in stops: linear × 2^ev.")]
+ToneMap = Annotated[str, Query(pattern=f"^({'|'.join(TONE_MAPS)})$", description="clamp, reinhard or aces.")]
+
+
+class LayerView(BaseModel):
+    name: str = Field(examples=["S0.555,000000nm"])
+    kind: str = Field(description="rgb, band, coherence or geometry.")
+    unit: str = Field(examples=["W·m⁻²·sr⁻¹·nm⁻¹"])
+    wavelength_nm: float | None = None
+    channels: int = Field(description="3 for `rgb` (interleaved R, G, B), else 1.")
+    min: float | None = None
+    max: float | None = None
+    p01: float | None = Field(None, description="1st percentile (diagnostics: over covered pixels).")
+    p99: float | None = Field(None, description="99th percentile.")
+
+
+class LayerCatalogue(BaseModel):
+    job_id: str
+    width: int
+    height: int
+    wavelengths_nm: list[float]
+    layers: list[LayerView]
+
+
+class PixelView(BaseModel):
+    x: int
+    y: int
+    wavelengths_nm: list[float]
+    spectrum: list[float | None]
+    spectrum_unit: str
+    rgb: list[float | None] = Field(description="Linear sRGB.")
+    coherence_covered: bool = Field(description="Whether the pixel carries coherence diagnostics.")
+    coherence: dict[str, float | None] = Field(
+        description="l1_um, l2_um (µm), angle (rad, image +y up), anisotropy, area_um2 (µm²), r_m (m), "
+        "Mxx, Mxy, Myy (m⁻²)."
+    )
+    coherence_weight: float | None
+    depth_m: float | None
+    normal: list[float | None]
+    albedo: list[float | None]
+
+
+class Ellipse(BaseModel):
+    x: int = Field(description="Pixel column (from the left).")
+    y: int = Field(description="Pixel row (from the top).")
+    l1_um: float
+    l2_um: float
+    angle: float = Field(description="Orientation of the ℓ₁ axis (rad, from +x towards image +y up).")
+    area_um2: float
+
+
+class EllipseGrid(BaseModel):
+    job_id: str
+    width: int
+    height: int
+    spacing: int
+    ellipses: list[Ellipse]
+
+
+class ExampleScene(BaseModel):
+    name: str = Field(examples=["cornell_box.json"])
+    title: str = Field(examples=["Cornell box"])
+
+
+def install(app: FastAPI, max_images: int = 8) -> None:
+    """Add the viewer routes and their decoded-image cache to ``app``."""
+    app.state.viewer_images = DecodedImageCache(app.state.store, max_images)
+    app.include_router(router)
+
+
+async def _image(request: Request, jobs: JobsDep, principal: Reader, job_id: str) -> DecodedImage:
+    view = await run_in_threadpool(visible_job, jobs, principal, job_id)
+    if view.status != JobStatus.SUCCEEDED:
+        raise JobConflictError(
+            f"job_id: job {job_id} is {view.status.value}; its image exists once it succeeded"
+        )
+    cache: DecodedImageCache = request.app.state.viewer_images
+    return await run_in_threadpool(cache.get, job_id)
+
+
+def _layer_view(info: LayerInfo) -> LayerView:
+    return LayerView.model_validate(info, from_attributes=True)
+
+
+@router.get(
+    "/v1/jobs/{job_id}/layers",
+    response_model=LayerCatalogue,
+    summary="Layers of a job's image (names, units, wavelengths, ranges)",
+    responses=_IMAGE_ERRORS,
+)
+async def list_layers(request: Request, job_id: JobId, jobs: JobsDep, principal: Reader) -> LayerCatalogue:
+    image = await _image(request, jobs, principal, job_id)
+    layers = await run_in_threadpool(image.layers)
+    return LayerCatalogue(
+        job_id=job_id,
+        width=image.width,
+        height=image.height,
+        wavelengths_nm=image.wavelengths_nm,
+        layers=[_layer_view(info) for info in layers],
+    )
+
+
+@router.get(
+    "/v1/jobs/{job_id}/layers/{name}",
+    summary="One layer as a raw little-endian float array",
+    response_class=Response,
+    responses={**_IMAGE_ERRORS, **_RAW},
+)
+async def get_layer(
+    request: Request,
+    job_id: JobId,
+    name: Annotated[str, Path(description="Layer name from /layers (`rgb`, `S0.555,000000nm`, ...).")],
+    jobs: JobsDep,
+    principal: Reader,
+    format: Annotated[str, Query(pattern="^(f16|f32)$", description="f16 or f32.")] = "f32",
+    step: Annotated[int, Query(ge=1, le=64, description="Downsampling factor.")] = 1,
+) -> Response:
+    """Row-major from the top-left pixel, channels interleaved (`rgb`: R, G, B). Headers `X-Width`,
+    `X-Height`, `X-Channels`, `X-Format`. Bands and RGB are block means; other layers point samples."""
+    image = await _image(request, jobs, principal, job_id)
+    values = await run_in_threadpool(layer_array, image, name, step)
+    channels = values.shape[2] if values.ndim == 3 else 1
+    headers = {
+        "X-Width": str(values.shape[1]),
+        "X-Height": str(values.shape[0]),
+        "X-Channels": str(channels),
+        "X-Format": format,
+        "Access-Control-Expose-Headers": "X-Width, X-Height, X-Channels, X-Format",
+    }
+    body = await run_in_threadpool(encode_array, values, format)
+    return Response(body, media_type="application/octet-stream", headers=headers)
+
+
+@router.get(
+    "/v1/jobs/{job_id}/pixel",
+    response_model=PixelView,
+    summary="Spectrum, RGB and coherence values of one pixel",
+    responses=_IMAGE_ERRORS,
+)
+async def get_pixel(
+    request: Request,
+    job_id: JobId,
+    jobs: JobsDep,
+    principal: Reader,
+    x: Annotated[int, Query(ge=0, description="Column from the left.")],
+    y: Annotated[int, Query(ge=0, description="Row from the top.")],
+) -> PixelView:
+    image = await _image(request, jobs, principal, job_id)
+    return PixelView.model_validate(pixel_record(image, x, y))
+
+
+@router.get(
+    "/v1/jobs/{job_id}/display.png",
+    summary="The sRGB image as the viewer displays it",
+    response_class=Response,
+    responses={**_IMAGE_ERRORS, 200: {"content": {"image/png": {}}, "description": "8-bit sRGB PNG."}},
+)
+async def get_display_png(
+    request: Request,
+    job_id: JobId,
+    jobs: JobsDep,
+    principal: Reader,
+    ev: ExposureEV = 0.0,
+    tonemap: ToneMap = "clamp",
+) -> Response:
+    """`hgrender.imaging.display_rgb8(rgb, ev, tonemap)` of the full-resolution image."""
+    image = await _image(request, jobs, principal, job_id)
+    return Response(await run_in_threadpool(display_png, image, ev, tonemap), media_type="image/png")
+
+
+@router.get(
+    "/v1/jobs/{job_id}/ellipses",
+    response_model=EllipseGrid,
+    summary="Coherence ellipses on a grid",
+    responses=_IMAGE_ERRORS,
+)
+async def get_ellipses(
+    request: Request,
+    job_id: JobId,
+    jobs: JobsDep,
+    principal: Reader,
+    spacing: Annotated[int, Query(ge=2, le=4096, description="Grid spacing in pixels.")] = 16,
+) -> EllipseGrid:
+    """One ellipse per grid cell whose centre pixel has diagnostics (ℓ₁, ℓ₂ at λ = 550 nm)."""
+    image = await _image(request, jobs, principal, job_id)
+    grid = await run_in_threadpool(ellipse_grid, image, spacing)
+    return EllipseGrid(
+        job_id=job_id,
+        width=image.width,
+        height=image.height,
+        spacing=spacing,
+        ellipses=[Ellipse.model_validate(e) for e in grid],
+    )
+
+
+@router.get(
+    "/v1/compare",
+    summary="Per-pixel difference of two jobs' images",
+    response_class=Response,
+    responses={**_IMAGE_ERRORS, **_RAW},
+)
+async def compare_jobs(
+    request: Request,
+    jobs: JobsDep,
+    principal: Reader,
+    a: Annotated[str, Query(pattern=r"^[0-9a-f]{32}$", description="Reference job id.")],
+    b: Annotated[str, Query(pattern=r"^[0-9a-f]{32}$", description="Compared job id.")],
+    mode: Annotated[str, Query(pattern=f"^({'|'.join(COMPARE_MODES)})$", description="abs, rel or de2000.")],
+    ev: ExposureEV = 0.0,
+    tonemap: ToneMap = "clamp",
+    format: Annotated[str, Query(pattern="^(f16|f32)$")] = "f32",
+) -> Response:
+    """Float (H, W) map, row-major from the top-left: `abs` = mean |b − a| over linear R, G, B; `rel` =
+    the same over max(|a|, 1 % of a's mean luminance); `de2000` = CIEDE2000 of both as displayed with `ev`
+    and `tonemap`. Headers `X-Width`, `X-Height` and `X-Stats` (JSON: mean, p95, max)."""
+    image_a = await _image(request, jobs, principal, a)
+    image_b = await _image(request, jobs, principal, b)
+    values = await run_in_threadpool(difference_map, image_a, image_b, mode, ev, tonemap)
+    headers = {
+        "X-Width": str(values.shape[1]),
+        "X-Height": str(values.shape[0]),
+        "X-Stats": json.dumps(difference_statistics(values)),
+        "Access-Control-Expose-Headers": "X-Width, X-Height, X-Stats",
+    }
+    return Response(encode_array(values, format), media_type="application/octet-stream", headers=headers)
+
+
+@router.get("/v1/examples", response_model=list[ExampleScene], summary="Example scenes", responses=_ERRORS)
+def list_examples(principal: Reader) -> list[ExampleScene]:
+    """The scenes in `schemas/examples/` (each renders as is)."""
+    return [
+        ExampleScene(name=path.name, title=json.loads(path.read_text()).get("name", path.stem))
+        for path in sorted(EXAMPLES_DIR.glob("*.json"))
+    ]
+
+
+@router.get("/v1/examples/{name}", summary="One example scene (JSON)", responses=_ERRORS)
+def get_example(
+    name: Annotated[str, Path(pattern=r"^[A-Za-z0-9_-]+\.json$")], principal: Reader
+) -> dict[str, Any]:
+    path = EXAMPLES_DIR / name
+    if not path.is_file():
+        raise ArtifactNotFoundError(name)
+    return json.loads(path.read_text())

@@ -1,0 +1,146 @@
+// Compare two jobs' images: side by side with a split slider, or a difference map (absolute, relative,
+// CIEDE2000 ΔE₀₀) in false colour with its statistics. Reused by the regression dashboard.
+//
+// Usage:
+//   import { mountCompare } from "/web/js/compare.js";
+//   import { Api } from "/web/js/api.js";
+//   const view = await mountCompare(document.querySelector("#here"), {
+//     leftJobId: "<32 hex>", rightJobId: "<32 hex>", api: new Api(),
+//     mode: "split",          // "split" | "abs" | "rel" | "de2000"   (optional)
+//     ev: 0, tonemap: "clamp", // display settings of both images and of ΔE₀₀ (optional)
+//   });
+//   await view.update({ mode: "de2000" });   // change any option; view.stats holds {mean, p95, max}
+//   view.destroy();                           // remove the DOM it created
+//
+// `api` is an instance of Api (web/js/api.js) or any object with the same `floats(path)` method.
+// Both jobs must have succeeded and have images of the same size. ΔE₀₀ is computed by the server
+// (GET /v1/compare, hgrender.colour) on both images as displayed with the same EV and tone map.
+
+import { displayRgb8, TONE_MAPS } from "./imaging.js";
+import { drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";
+
+const DE2000_RANGE = [0, 10]; // ΔE₀₀ ≈ 1 is just noticeable; 10 already reads as a different colour
+const MODES = [
+  ["split", "side by side (split slider)"],
+  ["abs", "absolute difference |b − a|"],
+  ["rel", "relative difference |b − a| / |a|"],
+  ["de2000", "CIEDE2000 ΔE₀₀"],
+];
+let instances = 0;
+
+/** Mount the compare view into `element`; resolves to a controller {update, destroy, stats, root}. */
+export async function mountCompare(element, { leftJobId, rightJobId, api, mode = "split", ev = 0, tonemap = "clamp" }) {
+  if (!leftJobId || !rightJobId) throw new Error("leftJobId: both leftJobId and rightJobId are required");
+  if (!TONE_MAPS.includes(tonemap)) throw new Error(`tonemap: must be one of ${TONE_MAPS.join(", ")}`);
+  const id = `compare-${++instances}`;
+  const root = document.createElement("section");
+  root.className = "compare";
+  root.setAttribute("aria-label", "compare two jobs");
+  root.innerHTML = `
+    <div class="controls">
+      <label for="${id}-mode">View</label>
+      <select id="${id}-mode" class="compare-mode">${MODES.map(([v, t]) => `<option value="${v}">${t}</option>`).join("")}</select>
+      <label for="${id}-ev">Exposure</label>
+      <input id="${id}-ev" class="compare-ev" type="range" min="-10" max="10" step="0.5">
+      <output class="compare-ev-label" for="${id}-ev"></output>
+      <label for="${id}-tonemap">Tone map</label>
+      <select id="${id}-tonemap" class="compare-tonemap">${TONE_MAPS.map((t) => `<option>${t}</option>`).join("")}</select>
+      <label for="${id}-split">Split</label>
+      <input id="${id}-split" class="compare-split" type="range" min="0" max="100" step="1" value="50">
+    </div>
+    <div class="compare-names"><span class="compare-left-name"></span><span class="compare-right-name"></span></div>
+    <div class="compare-stage">
+      <canvas class="compare-left" role="img" aria-label="left image (a)"></canvas>
+      <canvas class="compare-right" role="img" aria-label="right image (b)"></canvas>
+      <div class="compare-divider" aria-hidden="true"></div>
+      <canvas class="compare-diff" role="img" aria-label="difference map" hidden></canvas>
+    </div>
+    <div class="compare-legend"></div>
+    <p class="compare-stats" aria-live="polite"></p>`;
+  element.append(root);
+  const $ = (selector) => root.querySelector(selector);
+  const options = { mode, ev, tonemap };
+  const [left, right] = await Promise.all([
+    api.floats(`/v1/jobs/${leftJobId}/layers/rgb?format=f32`),
+    api.floats(`/v1/jobs/${rightJobId}/layers/rgb?format=f32`),
+  ]);
+  if (left.width !== right.width || left.height !== right.height) {
+    root.remove();
+    throw new Error(`rightJobId: image is ${right.width}x${right.height}, left is ${left.width}x${left.height}`);
+  }
+  $(".compare-left-name").textContent = `a: ${leftJobId.slice(0, 8)}`;
+  $(".compare-right-name").textContent = `b: ${rightJobId.slice(0, 8)}`;
+  for (const canvas of root.querySelectorAll("canvas")) {
+    canvas.width = left.width;
+    canvas.height = left.height;
+  }
+  $(".compare-stage").style.aspectRatio = `${left.width} / ${left.height}`;
+
+  const controller = { root, stats: null, update, destroy: () => root.remove() };
+
+  function drawImage(canvas, floats) {
+    const image = new ImageData(floats.width, floats.height);
+    displayRgb8(floats.data, image.data, options.ev, options.tonemap);
+    canvas.getContext("2d").putImageData(image, 0, 0);
+  }
+
+  function applySplit() {
+    const percent = Number($(".compare-split").value);
+    $(".compare-right").style.clipPath = `inset(0 0 0 ${percent}%)`;
+    $(".compare-divider").style.left = `${percent}%`;
+  }
+
+  async function drawDifference() {
+    const query = `a=${leftJobId}&b=${rightJobId}&mode=${options.mode}&ev=${options.ev}&tonemap=${options.tonemap}`;
+    const diff = await api.floats(`/v1/compare?${query}`);
+    const stats = JSON.parse(diff.headers.get("X-Stats"));
+    const range = options.mode === "de2000" ? DE2000_RANGE : [0, stats.p95 > 0 ? stats.p95 : stats.max || 1];
+    const scale = makeScale(range[0], range[1], false);
+    const image = new ImageData(diff.width, diff.height);
+    for (let i = 0; i < diff.data.length; i++) {
+      const [r, g, b] = viridis(scale.t(diff.data[i]));
+      image.data.set([r, g, b, 255], 4 * i);
+    }
+    $(".compare-diff").getContext("2d").putImageData(image, 0, 0);
+    const [unit, title] = {
+      abs: ["W·m⁻²·sr⁻¹·nm⁻¹", "|b − a| (mean of R, G, B)"],
+      rel: ["1", "|b − a| / |a|"],
+      de2000: ["1", "ΔE₀₀"],
+    }[options.mode];
+    drawColourBar($(".compare-legend"), scale, unit, title);
+    controller.stats = stats;
+    const statsNode = $(".compare-stats");
+    Object.assign(statsNode.dataset, { mode: options.mode, mean: stats.mean, p95: stats.p95, max: stats.max });
+    statsNode.textContent = `${title}: mean ${formatValue(stats.mean)}, 95th percentile ${formatValue(stats.p95)}, max ${formatValue(stats.max)}`;
+  }
+
+  async function update(changes = {}) {
+    Object.assign(options, changes);
+    $(".compare-mode").value = options.mode;
+    $(".compare-ev").value = String(options.ev);
+    $(".compare-ev-label").textContent = `${Number(options.ev).toFixed(1)} EV`;
+    $(".compare-tonemap").value = options.tonemap;
+    const split = options.mode === "split";
+    $(".compare-diff").hidden = split;
+    for (const selector of [".compare-left", ".compare-right", ".compare-divider"]) $(selector).hidden = !split;
+    $(".compare-split").disabled = !split;
+    drawImage($(".compare-left"), left);
+    drawImage($(".compare-right"), right);
+    applySplit();
+    if (split) {
+      $(".compare-legend").replaceChildren();
+      $(".compare-stats").textContent = "";
+    } else {
+      await drawDifference();
+    }
+    root.dataset.ready = String((Number(root.dataset.ready) || 0) + 1);
+    return controller;
+  }
+
+  const report = (promise) => promise.catch((error) => ($(".compare-stats").textContent = String(error.message || error)));
+  $(".compare-mode").addEventListener("change", (e) => report(update({ mode: e.target.value })));
+  $(".compare-ev").addEventListener("input", (e) => report(update({ ev: Number(e.target.value) })));
+  $(".compare-tonemap").addEventListener("change", (e) => report(update({ tonemap: e.target.value })));
+  $(".compare-split").addEventListener("input", applySplit);
+  return update();
+}

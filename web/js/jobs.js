@@ -1,0 +1,215 @@
+// Job list (status, live progress over SSE, duration, samples/s, cancel/delete) and the submit form
+// (upload a JSON/USD scene or pick an example; override spp, resolution, modes, chunks).
+
+import { formatValue } from "./colormap.js";
+
+const FINAL = new Set(["succeeded", "failed", "canceled"]);
+const MAX_STREAMS = 4; // browsers allow ~6 HTTP/1.1 connections per host; leave room for data requests
+
+/** Seconds the job has run (to now while running). */
+export function jobDurationS(job, nowS = Date.now() / 1000) {
+  const t = job.timings || {};
+  if (t.total_s != null && FINAL.has(job.status)) return t.total_s;
+  if (t.started_at == null) return null;
+  return (t.finished_at ?? nowS) - t.started_at;
+}
+
+/** Samples per second of the finished chunks (Σ samples / Σ chunk seconds; null before any). */
+export function samplesPerSecond(job) {
+  let samples = 0;
+  let seconds = 0;
+  for (const chunk of job.chunks || []) {
+    if (chunk.samples != null && chunk.seconds) {
+      samples += chunk.samples;
+      seconds += chunk.seconds;
+    }
+  }
+  return seconds > 0 ? samples / seconds : null;
+}
+
+/**
+ * The jobs panel. `onView(id)` opens the viewer, `onCompare(a, b)` the compare view.
+ */
+export class JobsPanel {
+  constructor(root, api, { onView, onCompare, onError }) {
+    this.root = root;
+    this.api = api;
+    this.onView = onView;
+    this.onCompare = onCompare;
+    this.onError = onError;
+    this.jobs = new Map();
+    this.streams = new Map();
+    this.selected = [];
+    this.table = root.querySelector("#job-rows");
+    this.form = root.querySelector("#submit-form");
+    this.form.addEventListener("submit", (event) => {
+      event.preventDefault();
+      this.submit().catch((error) => this.onError(error));
+    });
+    root.querySelector("#refresh-jobs").addEventListener("click", () => this.refresh().catch((e) => this.onError(e)));
+    root.querySelector("#compare-selected").addEventListener("click", () => {
+      if (this.selected.length === 2) this.onCompare(this.selected[0], this.selected[1]);
+    });
+    this.form.querySelector("#scene-file").addEventListener("change", () => this.updateFormState());
+    this.timer = window.setInterval(() => this.refresh().catch(() => {}), 5000);
+  }
+
+  async loadExamples() {
+    const select = this.form.querySelector("#scene-example");
+    const examples = await this.api.json("/v1/examples");
+    select.replaceChildren(new Option("— upload a file instead —", ""));
+    for (const example of examples) select.append(new Option(`${example.title} (${example.name})`, example.name));
+    if (examples.length) select.value = examples[0].name;
+    this.updateFormState();
+  }
+
+  updateFormState() {
+    // Resolution and modes are edited in the scene JSON; a USD upload keeps its own.
+    const file = this.form.querySelector("#scene-file").files[0];
+    const isUsd = file && !file.name.toLowerCase().endsWith(".json");
+    for (const id of ["#override-width", "#override-height", "#override-modes"]) this.form.querySelector(id).disabled = Boolean(isUsd);
+  }
+
+  async refresh() {
+    const listing = await this.api.json("/v1/jobs?limit=100");
+    const seen = new Set();
+    for (const job of listing.items) {
+      seen.add(job.id);
+      this.jobs.set(job.id, job);
+    }
+    for (const id of [...this.jobs.keys()]) if (!seen.has(id)) this.jobs.delete(id);
+    this.render();
+    this.followActive();
+  }
+
+  followActive() {
+    for (const job of this.jobs.values()) {
+      if (FINAL.has(job.status) || this.streams.has(job.id) || this.streams.size >= MAX_STREAMS) continue;
+      const controller = new AbortController();
+      this.streams.set(job.id, controller);
+      this.api
+        .events(`/v1/jobs/${job.id}/events`, (type, data) => this.onEvent(job.id, type, data), controller.signal)
+        .catch(() => {})
+        .finally(() => {
+          this.streams.delete(job.id);
+          this.followActive();
+        });
+    }
+  }
+
+  onEvent(id, type, data) {
+    const job = this.jobs.get(id);
+    if (!job) return;
+    if (type === "status") this.jobs.set(id, data);
+    else if (type === "progress") Object.assign(job, { progress: data.progress, chunks_done: data.chunks_done, eta_s: data.eta_s, status: job.status === "queued" ? "running" : job.status });
+    this.renderRow(this.jobs.get(id));
+  }
+
+  render() {
+    const ids = [...this.jobs.values()].sort((a, b) => b.timings.created_at - a.timings.created_at).map((j) => j.id);
+    const rows = new Map([...this.table.querySelectorAll("tr[data-job-id]")].map((tr) => [tr.dataset.jobId, tr]));
+    for (const [id, tr] of rows) if (!this.jobs.has(id)) tr.remove();
+    for (const id of ids) this.renderRow(this.jobs.get(id));
+    for (const id of ids) this.table.append(this.table.querySelector(`tr[data-job-id="${id}"]`));
+    this.root.querySelector("#jobs-empty").hidden = ids.length > 0;
+  }
+
+  renderRow(job) {
+    let tr = this.table.querySelector(`tr[data-job-id="${job.id}"]`);
+    if (!tr) {
+      tr = document.createElement("tr");
+      tr.dataset.jobId = job.id;
+      tr.innerHTML = `
+        <td><input type="checkbox" class="job-select"></td>
+        <td class="job-name"></td>
+        <td class="job-status"></td>
+        <td><progress class="job-progress" max="1" value="0"></progress> <span class="job-percent"></span></td>
+        <td class="job-duration"></td>
+        <td class="job-rate"></td>
+        <td class="job-actions">
+          <button type="button" class="job-view">View</button>
+          <button type="button" class="job-cancel">Cancel</button>
+          <button type="button" class="job-delete">Delete</button>
+        </td>`;
+      const label = job.name || job.id.slice(0, 8);
+      tr.querySelector(".job-select").setAttribute("aria-label", `select ${label} for comparison`);
+      tr.querySelector(".job-progress").setAttribute("aria-label", `progress of ${label}`);
+      tr.querySelector(".job-select").addEventListener("change", (event) => this.toggleSelected(job.id, event.target.checked));
+      tr.querySelector(".job-view").addEventListener("click", () => this.onView(job.id));
+      tr.querySelector(".job-cancel").addEventListener("click", () => this.cancel(job.id).catch((e) => this.onError(e)));
+      tr.querySelector(".job-delete").addEventListener("click", () => this.remove(job.id).catch((e) => this.onError(e)));
+      this.table.append(tr);
+    }
+    const label = job.name || job.id.slice(0, 8);
+    tr.querySelector(".job-name").textContent = label;
+    tr.querySelector(".job-name").title = job.id;
+    const status = tr.querySelector(".job-status");
+    status.textContent = job.status + (job.error ? ` (${job.error})` : "");
+    status.className = `job-status status-${job.status}`;
+    tr.dataset.status = job.status;
+    tr.querySelector(".job-progress").value = job.progress;
+    tr.querySelector(".job-percent").textContent = `${Math.round(job.progress * 100)}%`;
+    const duration = jobDurationS(job);
+    tr.querySelector(".job-duration").textContent = duration == null ? "—" : `${duration.toFixed(1)} s`;
+    const rate = samplesPerSecond(job);
+    tr.querySelector(".job-rate").textContent = rate == null ? "—" : `${formatValue(rate)} samples/s`;
+    tr.querySelector(".job-view").disabled = job.status !== "succeeded";
+    tr.querySelector(".job-cancel").disabled = FINAL.has(job.status);
+  }
+
+  toggleSelected(id, on) {
+    this.selected = this.selected.filter((x) => x !== id);
+    if (on) this.selected.push(id);
+    while (this.selected.length > 2) {
+      const dropped = this.selected.shift();
+      const box = this.table.querySelector(`tr[data-job-id="${dropped}"] .job-select`);
+      if (box) box.checked = false;
+    }
+    this.root.querySelector("#compare-selected").disabled = this.selected.length !== 2;
+  }
+
+  async cancel(id) {
+    this.jobs.set(id, await this.api.json(`/v1/jobs/${id}/cancel`, { method: "POST" }));
+    this.renderRow(this.jobs.get(id));
+  }
+
+  async remove(id) {
+    if (!window.confirm(`Delete job ${id} and its artifacts?`)) return;
+    await this.api.json(`/v1/jobs/${id}`, { method: "DELETE" });
+    this.streams.get(id)?.abort();
+    this.jobs.delete(id);
+    this.render();
+  }
+
+  /** Build the request from the form and POST it; returns the new job's id. */
+  async submit() {
+    const form = this.form;
+    const number = (id) => (form.querySelector(id).value === "" ? null : Number(form.querySelector(id).value));
+    const options = { spp: number("#override-spp"), chunks: number("#override-chunks") };
+    const name = form.querySelector("#job-name").value.trim();
+    if (name) options.name = name;
+    const file = form.querySelector("#scene-file").files[0];
+    const example = form.querySelector("#scene-example").value;
+    let created;
+    if (file && !file.name.toLowerCase().endsWith(".json")) {
+      const body = new FormData();
+      body.append("scene", file, file.name);
+      for (const [key, value] of Object.entries(options)) if (value != null) body.append(key, String(value));
+      created = await this.api.json("/v1/jobs", { method: "POST", body });
+    } else {
+      let scene;
+      if (file) scene = JSON.parse(await file.text());
+      else if (example) scene = await this.api.json(`/v1/examples/${encodeURIComponent(example)}`);
+      else throw new Error("scene: choose an example or a file");
+      scene.film = scene.film || {};
+      const overrides = { width: number("#override-width"), height: number("#override-height"), modes: number("#override-modes") };
+      for (const [key, value] of Object.entries(overrides)) if (value != null) scene.film[key] = value;
+      const body = { scene };
+      for (const [key, value] of Object.entries(options)) if (value != null) body[key] = value;
+      created = await this.api.postJson("/v1/jobs", body);
+    }
+    this.root.querySelector("#submit-status").textContent = `submitted ${created.id}`;
+    await this.refresh();
+    return created.id;
+  }
+}
