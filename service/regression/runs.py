@@ -26,7 +26,7 @@ from rq.job import Dependency
 import schemas
 from schemas import validate_scene
 from service.core.config import Settings
-from service.jobs import JobService, merge_rq_id, scene_key
+from service.jobs import JobService, merge_rq_id
 from service.models import JobStatus
 from service.regression.images import load_render_outputs
 from service.regression.metrics import compare_renders
@@ -80,7 +80,7 @@ class RunService:
 
     def job_scene(self, job_id: str) -> dict[str, Any]:
         """The stored scene document of an earlier job."""
-        return json.loads(self.jobs.store.get_bytes(scene_key(job_id)))
+        return self.jobs.scene(job_id)
 
     def start_run(
         self,

@@ -176,12 +176,17 @@ class RegressionScheduler:
         for schedule_id, schedule in schedules.items():
             job = jobs.get(schedule_id)
             if job is None:
+                # First due time counted from the schedule's creation, not from when a scheduler first
+                # saw it: one created while no scheduler ran still gets its first run (misfire policy).
+                trigger = trigger_for(schedule)
+                created = datetime.fromtimestamp(schedule.created_at, UTC)
                 job = scheduler.add_job(
                     fire_placeholder,
-                    trigger_for(schedule),
+                    trigger,
                     args=(schedule_id,),
                     id=schedule_id,
                     name=schedule.name,
+                    next_run_time=trigger.get_next_fire_time(None, created),
                 )
             if schedule.paused and job.next_run_time is not None:
                 scheduler.pause_job(schedule_id)
