@@ -140,6 +140,7 @@ def serve_command(args: argparse.Namespace) -> int:
     from service.core.config import Settings
     from service.main import create_app
     from service.redis_server import RedisServer
+    from service.regression.scheduler import start_scheduler_thread
 
     data_dir: Path = args.data_dir.resolve()
     overrides: dict[str, Any] = {"data_dir": data_dir}
@@ -159,10 +160,13 @@ def serve_command(args: argparse.Namespace) -> int:
         env = {**os.environ, **settings.to_env()}
         supervisor = WorkerSupervisor(settings.worker_count, env)
         supervisor.start()
-        # Issue 7's cron scheduler is started here, next to the workers, with the same environment.
+        # The regression scheduler (issue 7), leader-elected: several `serve` processes fire each run once.
+        scheduler = start_scheduler_thread(settings)[0] if settings.regression_scheduler else None
         try:
             uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="warning")
         finally:
+            if scheduler is not None:
+                scheduler.stop_event.set()
             supervisor.stop()
     finally:
         if redis_server is not None:
