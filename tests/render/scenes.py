@@ -302,3 +302,62 @@ def fig8_coated_plane(*, via_mirror: bool, spp: int) -> dict[str, Any]:
             }
         )
     return scene
+
+
+def smooth_coated_plane_mirroring_light(*, spp: int) -> dict[str, Any]:
+    """A smooth (σ = 1 nm ⇒ e^{−g} ≈ 1) coated plane whose Dirac reflection shows a small sphere light.
+
+    Incidence 20°, light radius 1 cm at 0.3 m: ℓ = r/(k·a/2) ≈ 5 µm ≫ ξ = τ·sin θ ≈ 0.42 µm, so V ≈ 1. The
+    camera sits in the mirror direction with a 1° field, so every pixel's reflected ray ends on the light.
+    """
+    theta = math.radians(20.0)
+    return {
+        "schema": "hgrender/scene/v1",
+        "name": "smooth coated plane",
+        "camera": {
+            "type": "perspective",
+            "origin_m": [-0.3 * math.sin(theta), 0.0, 0.3 * math.cos(theta)],
+            "target_m": [0.0, 0.0, 0.0],
+            "up": [0.0, 1.0, 0.0],
+            "fov_deg": 1.0,
+        },
+        "film": {
+            "width": 8,
+            "height": 8,
+            "bands": FIG7_BANDS,
+            "spp": spp,
+            "max_depth": 2,
+            "wavelength_min_nm": FIG7_WAVELENGTH_RANGE_NM[0],
+            "wavelength_max_nm": FIG7_WAVELENGTH_RANGE_NM[1],
+        },
+        "materials": {
+            "coating": {
+                "type": "thin_film",
+                "film_thickness_um": FIG7_FILM["thickness_um"],
+                "film_ior": FIG7_FILM["ior"],
+                "substrate": {"conductor": FIG7_FILM["substrate"]},
+                "roughness_rms_um": 0.001,
+                "correlation_length_um": 5.0,
+                "beams": 2,
+            }
+        },
+        "shapes": [
+            {
+                "type": "rectangle",
+                "material": "coating",
+                "center_m": [0.0, 0.0, 0.0],
+                "normal": [0.0, 0.0, 1.0],
+                "up": [0.0, 1.0, 0.0],
+                "width_m": 0.5,
+                "height_m": 0.5,
+            }
+        ],
+        "emitters": [
+            {
+                "type": "sphere",
+                "center_m": [0.3 * math.sin(theta), 0.0, 0.3 * math.cos(theta)],
+                "radius_m": 0.01,
+                **constant_spectrum(10.0),
+            }
+        ],
+    }
