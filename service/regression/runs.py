@@ -194,7 +194,6 @@ class RunService:
                 "reasons": [reason for r in results for reason in r.reasons],
             }
         )
-        self.regression.save_run(run)
         if status != "passed" and run.webhook_url:
             outcome = deliver_webhook(
                 run.webhook_url,
@@ -203,7 +202,8 @@ class RunService:
                 timeout_s=self.settings.regression_webhook_timeout_s,
             )
             run = run.model_copy(update={"webhook": outcome})
-            self.regression.save_run(run)
+        # One write of the final state: a finished run already carries its alert's delivery outcome.
+        self.regression.save_run(run)
         return run
 
 

@@ -1,0 +1,153 @@
+"""Schedules, runs, baselines and failure webhooks through the HTTP API, with a real queue worker.
+
+The suite is the thin film under a sphere light at 16×16 px, 8 spp, 8 bands (as in test_regress_cli.py):
+a re-render with another seed (every run has its own) passes; doubling the light's radius halves the
+coherence lengths and fails on coherence drift. Run-now is used instead of waiting for due times (the
+scheduler has its own tests).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from tests.regression.test_webhooks import Receiver
+from tests.service.conftest import LiveService, wait_for
+
+SCENE_NAME = "thin_film"
+
+
+def suite(light_radius_m: float = 0.006) -> dict[str, Any]:
+    scene = json.loads(
+        (Path(__file__).parents[2] / "schemas/examples/thin_film_sphere_light.json").read_text()
+    )
+    scene["film"]["bands"] = 8
+    scene["emitters"][0]["radius_m"] = light_radius_m
+    return {"scenes": [{"name": SCENE_NAME, "scene": scene, "spp": 8, "width": 16, "height": 16}]}
+
+
+class Client:
+    def __init__(self, service: LiveService) -> None:
+        self.http = httpx.Client(
+            base_url=service.base_url, headers={"Authorization": f"Bearer {service.admin_token}"}, timeout=30
+        )
+
+    def post(self, path: str, body: Any = None, expect: int = 200) -> Any:
+        response = self.http.post(path, json=body if body is not None else {})
+        assert response.status_code == expect, response.text
+        return response.json() if response.content else None
+
+    def get(self, path: str, expect: int = 200) -> Any:
+        response = self.http.get(path)
+        assert response.status_code == expect, response.text
+        return response.json()
+
+    def run_to_end(self, schedule_id: str) -> dict[str, Any]:
+        run = self.post(f"/v1/schedules/{schedule_id}/run", expect=202)
+        assert run["status"] == "running" and run["trigger"] == "manual"
+        return wait_for(
+            lambda: (r := self.get(f"/v1/runs/{run['id']}"))["status"] != "running" and r,
+            120,
+            f"run {run['id']} to finish",
+            interval_s=0.3,
+        )
+
+
+@pytest.fixture()
+def receiver() -> Any:
+    hook = Receiver(failures=1)  # the first delivery fails: the alert only arrives through a retry
+    hook.thread.start()
+    yield hook
+    hook.server.shutdown()
+    hook.server.server_close()
+
+
+def test_runs_pass_on_noise_fail_on_change_alert_and_promote(
+    live_service: LiveService, receiver: Any
+) -> None:
+    live_service.start_worker(HGRENDER_REGRESSION_WEBHOOK_RETRY_INTERVALS_S="[0.2, 0.4]")
+    api = Client(live_service)
+    reference = api.post("/v1/schedules", {"name": "ref", "interval_s": 86400, "suite": suite()}, expect=201)
+
+    first = api.run_to_end(reference["id"])
+    assert first["status"] == "passed"
+    assert first["scenes"][0]["metrics"] == {"baseline_created": 1}  # no baseline yet: this render is v1
+    baselines = api.get(f"/v1/baselines/{SCENE_NAME}")
+    assert baselines["current"] == 1 and baselines["versions"][0]["job_id"] == first["scenes"][0]["job_id"]
+
+    second = api.run_to_end(reference["id"])
+    assert second["status"] == "passed", second["reasons"]
+    assert second["scenes"][0]["baseline_version"] == 1
+    assert second["scenes"][0]["job_id"] != first["scenes"][0]["job_id"]
+    assert second["scenes"][0]["metrics"]["delta_e00"]["p95"] > 0  # noise differs, yet passes
+
+    changed = api.post(
+        "/v1/schedules",
+        {"name": "bigger light", "interval_s": 86400, "suite": suite(0.012), "webhook_url": receiver.url},
+        expect=201,
+    )
+    failed = api.run_to_end(changed["id"])
+    assert failed["status"] == "failed"
+    assert any(r.startswith(f"{SCENE_NAME}: coherence_drift of l1_um") for r in failed["reasons"])
+    assert failed["webhook"]["delivered"] is True and failed["webhook"]["attempts"] == 2
+    assert len(receiver.bodies) == 2 and receiver.bodies[-1]["event"] == "regression.failed"
+    assert receiver.bodies[-1]["run"]["id"] == failed["id"]
+
+    history = api.get(f"/v1/schedules/{changed['id']}/runs")
+    assert [run["id"] for run in history["items"]] == [failed["id"]]
+    assert history["series"][SCENE_NAME][0]["verdict"] == "fail"
+    assert history["series"][SCENE_NAME][0]["baseline_job_id"] == first["scenes"][0]["job_id"]
+
+    promoted = api.post("/v1/baselines", {"run_id": failed["id"]}, expect=201)
+    assert [(b["scene"], b["version"]) for b in promoted] == [(SCENE_NAME, 2)]
+    after = api.run_to_end(changed["id"])
+    assert after["status"] == "passed" and after["scenes"][0]["baseline_version"] == 2
+    # Roll back: the reference schedule's scene compares with v1 again.
+    api.post(f"/v1/baselines/{SCENE_NAME}/current?version=1")
+    assert api.get(f"/v1/baselines/{SCENE_NAME}")["current"] == 1
+
+
+def test_schedule_lifecycle_and_validation(live_service: LiveService) -> None:
+    api = Client(live_service)
+    created = api.post(
+        "/v1/schedules",
+        {"name": "nightly", "cron": "0 2 * * *", "timezone": "Europe/Berlin", "suite": suite()},
+        expect=201,
+    )
+    assert api.get(f"/v1/schedules/{created['id']}")["timezone"] == "Europe/Berlin"
+    assert api.post(f"/v1/schedules/{created['id']}/pause")["paused"] is True
+    assert api.post(f"/v1/schedules/{created['id']}/resume")["paused"] is False
+    assert created["id"] in [s["id"] for s in api.get("/v1/schedules")["items"]]
+    assert api.http.delete(f"/v1/schedules/{created['id']}").status_code == 204
+    api.get(f"/v1/schedules/{created['id']}", expect=404)
+
+    for body, field in (
+        ({"name": "x", "cron": "every day", "suite": suite()}, "cron"),
+        ({"name": "x", "cron": "0 2 * * *", "interval_s": 60, "suite": suite()}, "cron"),
+        ({"name": "x", "interval_s": 60, "timezone": "Mars/Olympus", "suite": suite()}, "timezone"),
+        ({"name": "x", "interval_s": 60, "suite": {"scenes": []}}, "scenes"),
+    ):
+        response = api.http.post("/v1/schedules", json=body)
+        assert response.status_code == 422 and field in response.text, (body, response.text)
+
+
+def test_other_owners_cannot_see_schedules(live_service: LiveService) -> None:
+    api = Client(live_service)
+    created = api.post(
+        "/v1/schedules", {"name": "private", "interval_s": 86400, "suite": suite()}, expect=201
+    )
+    token = live_service.token("mallory")
+    response = httpx.get(
+        f"{live_service.base_url}/v1/schedules/{created['id']}",
+        headers={"Authorization": f"Bearer {token}"},
+        timeout=30,
+    )
+    assert response.status_code == 404
+    listing = httpx.get(
+        f"{live_service.base_url}/v1/schedules", headers={"Authorization": f"Bearer {token}"}, timeout=30
+    )
+    assert created["id"] not in [s["id"] for s in listing.json()["items"]]
