@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import redis
+import redis.asyncio as aioredis
 
 SCOPES: tuple[str, ...] = ("submit", "read", "admin")
 TOKEN_PREFIX = "hgr_"
@@ -120,17 +121,6 @@ class TokenRegistry:
         token = TOKEN_PREFIX + secrets.token_urlsafe(32)
         return token, self.register(token, owner, scopes, name)
 
-    def authenticate(self, token: str | None) -> Principal:
-        if not token:
-            raise AuthenticationError("authorization: missing bearer token")
-        if not token.startswith(TOKEN_PREFIX) or len(token) > 256:
-            raise AuthenticationError("authorization: malformed bearer token")
-        record = self.client.hgetall(_TOKEN_KEY.format(hash_token(token)))
-        if not record:
-            raise AuthenticationError("authorization: unknown or revoked token")
-        scopes = frozenset(record[b"scopes"].decode().split(","))
-        return Principal(owner=record[b"owner"].decode(), scopes=scopes, token_id=record[b"id"].decode())
-
     def list(self) -> list[TokenInfo]:
         hashes = sorted(h.decode() for h in self.client.smembers(_TOKEN_INDEX))
         with self.client.pipeline() as pipe:
@@ -160,19 +150,45 @@ class TokenRegistry:
                 return True
         return False
 
-    def check_rate_limit(self, principal: Principal, limit_per_minute: int) -> None:
-        """Count this request in the token's current minute; raise RateLimitedError above the limit."""
-        if principal.token_id is None:
-            return
+
+# KEYS: token hash, this minute's rate counter. ARGV: counter TTL (s). Returns false for an unknown token,
+# else {count, hgetall...}: one round trip authenticates and counts (unknown tokens are not counted).
+_AUTHENTICATE_LUA = """
+local record = redis.call('HGETALL', KEYS[1])
+if #record == 0 then return false end
+local count = redis.call('INCR', KEYS[2])
+if count == 1 then redis.call('EXPIRE', KEYS[2], ARGV[1]) end
+return {count, record}
+"""
+
+
+class RequestAuthenticator:
+    """Authenticates a request's bearer token and applies its rate limit, on the API's asyncio client."""
+
+    def __init__(self, aclient: aioredis.Redis, limit_per_minute: int) -> None:
+        self.limit_per_minute = limit_per_minute
+        self._script = aclient.register_script(_AUTHENTICATE_LUA)
+
+    async def __call__(self, token: str | None) -> Principal:
+        if not token:
+            raise AuthenticationError("authorization: missing bearer token")
+        if not token.startswith(TOKEN_PREFIX) or len(token) > 256:
+            raise AuthenticationError("authorization: malformed bearer token")
+        token_hash = hash_token(token)
         now = time.time()
         window = int(now // 60)
-        key = _RATE_KEY.format(principal.token_id, window)
-        with self.client.pipeline(transaction=False) as pipe:
-            pipe.incr(key)
-            pipe.expire(key, 120)
-            count = pipe.execute()[0]
-        if count > limit_per_minute:
+        result = await self._script(
+            keys=[_TOKEN_KEY.format(token_hash), _RATE_KEY.format(token_hash[:12], window)], args=[120]
+        )
+        if not result:
+            raise AuthenticationError("authorization: unknown or revoked token")
+        count, flat = int(result[0]), result[1]
+        record = {flat[i].decode(): flat[i + 1].decode() for i in range(0, len(flat), 2)}
+        if count > self.limit_per_minute:
             raise RateLimitedError(retry_after_s=max(1, int((window + 1) * 60 - now) + 1))
+        return Principal(
+            owner=record["owner"], scopes=frozenset(record["scopes"].split(",")), token_id=record["id"]
+        )
 
 
 def ensure_admin_token(client: redis.Redis, token_path: Path) -> str:

@@ -7,6 +7,7 @@ names, plus one merge job (``<id>-merge``) that depends on all chunks (failures 
 is also where a failed chunk fails the job). Redis layout, all under ``hgrender:``:
 
 ``job:<id>``            hash: the record (owner, status, priority, spp, seed, chunks, timestamps, error)
+``job:<id>:scene``      string: the validated scene document (JSON)
 ``job:<id>:chunks``     hash: ``<i>.<field>`` per chunk (status, progress, worker, attempts, samples, ...)
                         and ``merge.<field>``, written by the workers
 ``jobs`` / ``jobs:owner:<o>``  sorted sets of ids by creation time (listing, pagination)
@@ -19,6 +20,7 @@ never change. Every transition is one Lua script call, so concurrent workers and
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import json
 import time
@@ -27,6 +29,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import redis
+import redis.asyncio as aioredis
 from rq import Queue, Retry
 from rq.command import send_stop_job_command
 from rq.exceptions import InvalidJobOperation, NoSuchJobError
@@ -51,6 +54,7 @@ MERGE_TASK = "worker.tasks.merge_task"
 
 _JOB_KEY = "hgrender:job:{}"
 _CHUNKS_KEY = "hgrender:job:{}:chunks"
+_SCENE_KEY = "hgrender:job:{}:scene"
 _INDEX_KEY = "hgrender:jobs"
 _OWNER_INDEX_KEY = "hgrender:jobs:owner:{}"
 _BY_STATE_KEY = "hgrender:jobs:by_state"
@@ -104,6 +108,7 @@ def rq_ids(job_id: str, chunk_count: int) -> list[str]:
 
 
 def scene_key(job_id: str) -> str:
+    """Store key of the scene's provenance copy, written with the final artifacts."""
     return f"jobs/{job_id}/scene.json"
 
 
@@ -126,11 +131,20 @@ def _float_or_none(value: str | None) -> float | None:
 class JobService:
     """Operations on jobs, shared by the API (``service.api``) and the queue tasks (``worker.tasks``)."""
 
-    def __init__(self, client: redis.Redis, store: ArtifactStore, settings: Settings) -> None:
+    def __init__(
+        self,
+        client: redis.Redis,
+        store: ArtifactStore,
+        settings: Settings,
+        aclient: aioredis.Redis | None = None,
+    ) -> None:
         self.client = client
+        self.aclient = aclient  # the API's asyncio client, for the hot read path (aget)
         self.store = store
         self.settings = settings
         self._transition_script = client.register_script(_TRANSITION_LUA)
+        # Queue objects cache the server version RQ asks for on every enqueue.
+        self._queues = {name: Queue(name, connection=client) for name in PRIORITY_QUEUES.values()}
 
     # ---- creation -------------------------------------------------------------------------------------
 
@@ -172,8 +186,6 @@ class JobService:
                 if view is not None:
                     return view, False
                 self.client.set(key, job_id, ex=self.settings.idempotency_ttl_s)
-        # Scene first: a worker that dequeues a chunk must find it.
-        self.store.put_bytes(scene_key(job_id), json.dumps(scene, separators=(",", ":")).encode())
         for relative_name, data in (extra_files or {}).items():
             self.store.put_bytes(f"jobs/{job_id}/input/{relative_name}", data)
         now = time.time()
@@ -191,59 +203,87 @@ class JobService:
             "finished_at": "",
             "error": "",
         }
+        # One MULTI/EXEC: the record, the scene and every RQ job appear together, and the merge step is
+        # registered as a dependent before any chunk exists that could finish.
+        try:
+            self._commit(job_id, owner, record, scene, chunk_count, priority, now)
+        except Exception:
+            self.store.delete_prefix(artifact_prefix(job_id))  # uploaded bundle files, if any
+            raise
+        view = build_view(record, {f"{i}.status": "queued" for i in range(chunk_count)}, now)
+        return view, True
+
+    def _commit(
+        self,
+        job_id: str,
+        owner: str,
+        record: dict[str, str],
+        scene: dict[str, Any],
+        chunk_count: int,
+        priority: str,
+        now: float,
+    ) -> None:
         with self.client.pipeline() as pipe:
+            pipe.multi()
             pipe.hset(_JOB_KEY.format(job_id), mapping=record)
+            pipe.set(_SCENE_KEY.format(job_id), json.dumps(scene, separators=(",", ":")))
             pipe.hset(
-                _CHUNKS_KEY.format(job_id),
-                mapping={f"{i}.status": "queued" for i in range(chunk_count)},
+                _CHUNKS_KEY.format(job_id), mapping={f"{i}.status": "queued" for i in range(chunk_count)}
             )
             pipe.zadd(_INDEX_KEY, {job_id: now})
             pipe.zadd(_OWNER_INDEX_KEY.format(owner), {job_id: now})
             pipe.hincrby(_BY_STATE_KEY, JobStatus.QUEUED.value, 1)
+            self._enqueue(pipe, job_id, chunk_count, PRIORITY_QUEUES[priority])
             pipe.execute()
-        try:
-            self._enqueue(job_id, chunk_count, PRIORITY_QUEUES[priority])
-        except Exception:
-            self.delete(job_id)  # nothing half-enqueued stays behind
-            raise
-        view = self.get(job_id)
-        assert view is not None
-        return view, True
 
-    def _enqueue(self, job_id: str, chunk_count: int, queue_name: str) -> None:
-        queue = Queue(queue_name, connection=self.client)
+    def _enqueue(self, pipe: redis.client.Pipeline, job_id: str, chunk_count: int, queue_name: str) -> None:
+        """Add the chunk jobs (queued) and the merge job (deferred on all chunks, failures allowed)."""
+        queue = self._queues[queue_name]
         retry = (
             Retry(max=self.settings.chunk_retry_max, interval=self.settings.chunk_retry_intervals_s)
             if self.settings.chunk_retry_max > 0
             else None
         )
-        common = {
+        common: dict[str, Any] = {
             "timeout": self.settings.job_timeout_s,
             "result_ttl": self.settings.result_ttl_s,
             "failure_ttl": self.settings.result_ttl_s,
             "retry": retry,
         }
-        chunk_jobs = queue.enqueue_many(
-            [
-                Queue.prepare_data(
-                    CHUNK_TASK,
-                    args=(job_id, index),
-                    job_id=chunk_rq_id(job_id, index),
-                    description=f"render chunk {index} of job {job_id}",
-                    **common,
-                )
-                for index in range(chunk_count)
-            ]
-        )
-        # enqueue_call registers the dependency under WATCH, so chunks that finish meanwhile are counted.
-        queue.enqueue_call(
+        chunk_ids = [chunk_rq_id(job_id, index) for index in range(chunk_count)]
+        for index, rq_id in enumerate(chunk_ids):
+            chunk = queue.create_job(
+                CHUNK_TASK,
+                args=(job_id, index),
+                job_id=rq_id,
+                description=f"render chunk {index} of job {job_id}",
+                **common,
+            )
+            queue.enqueue_job(chunk, pipeline=pipe)
+        merge = queue.create_job(
             MERGE_TASK,
             args=(job_id,),
             job_id=merge_rq_id(job_id),
             description=f"merge job {job_id}",
-            depends_on=Dependency(jobs=chunk_jobs, allow_failure=True),
+            depends_on=Dependency(jobs=chunk_ids, allow_failure=True),
+            status=RQJobStatus.DEFERRED,
             **common,
         )
+        merge.origin = queue.name
+        merge.save(pipeline=pipe)
+        merge.register_dependency(pipeline=pipe)
+        pipe.sadd(queue.redis_queues_keys, queue.key)
+
+    def scene(self, job_id: str) -> dict[str, Any]:
+        """The job's validated scene document: kept in Redis with the record (so a submission touches no
+        disk), and copied to the store as ``scene.json`` with the final artifacts."""
+        data = self.client.get(_SCENE_KEY.format(job_id))
+        if data is None:
+            try:
+                data = self.store.get_bytes(scene_key(job_id))
+            except ArtifactNotFoundError:
+                raise JobNotFoundError(job_id) from None
+        return json.loads(data)
 
     # ---- reading --------------------------------------------------------------------------------------
 
@@ -256,6 +296,18 @@ class JobService:
         if record:
             return build_view(_decode(record), _decode(chunk_fields))
         return self._view_from_manifest(job_id)
+
+    async def aget(self, job_id: str) -> JobView | None:
+        """``get`` on the asyncio client (the API's most frequent request stays off the thread pool)."""
+        if self.aclient is None:
+            raise RuntimeError("aclient: JobService was built without an asyncio Redis client")
+        async with self.aclient.pipeline(transaction=False) as pipe:
+            pipe.hgetall(_JOB_KEY.format(job_id))
+            pipe.hgetall(_CHUNKS_KEY.format(job_id))
+            record, chunk_fields = await pipe.execute()
+        if record:
+            return build_view(_decode(record), _decode(chunk_fields))
+        return await asyncio.to_thread(self._view_from_manifest, job_id)
 
     def _view_from_manifest(self, job_id: str) -> JobView | None:
         if not job_id.isalnum():
@@ -350,7 +402,7 @@ class JobService:
             with contextlib.suppress(NoSuchJobError):
                 RQJob.fetch(rq_id, connection=self.client).delete()
         with self.client.pipeline() as pipe:
-            pipe.delete(_JOB_KEY.format(job_id), _CHUNKS_KEY.format(job_id))
+            pipe.delete(_JOB_KEY.format(job_id), _CHUNKS_KEY.format(job_id), _SCENE_KEY.format(job_id))
             pipe.zrem(_INDEX_KEY, job_id)
             if record:
                 pipe.zrem(_OWNER_INDEX_KEY.format(record["owner"]), job_id)

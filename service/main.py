@@ -20,7 +20,7 @@ from service.api.errors import install_exception_handlers
 from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware
 from service.api.routes import coherence, health, jobs, schemas, tokens, viewer, web
 from service.api.routes import schedules as regression_routes
-from service.auth import TokenRegistry
+from service.auth import RequestAuthenticator, TokenRegistry
 from service.core.config import Settings
 from service.jobs import JobService
 from service.metrics import LatencyHistogram
@@ -66,8 +66,9 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.redis = client
     app.state.aredis = aioredis.Redis.from_url(settings.redis_url)
     app.state.store = store
-    app.state.jobs = JobService(client, store, settings)
+    app.state.jobs = JobService(client, store, settings, aclient=app.state.aredis)
     app.state.tokens = TokenRegistry(client)
+    app.state.authenticator = RequestAuthenticator(app.state.aredis, settings.rate_limit_per_minute)
     app.state.scene_limits = SceneLimits()
     app.state.latency = latency
 

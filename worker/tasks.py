@@ -32,6 +32,21 @@ CANCEL_POLL_INTERVAL_S = 0.5
 """How often a running chunk re-reads its job's status (a cancel stops it within this plus one pass)."""
 
 
+def preload_renderer() -> None:
+    """Import the renderer in the worker's main process, so that every forked work horse starts with it
+    loaded (saves the ~0.7 s import per chunk). Only imports: no Dr.Jit backend is initialised here,
+    because its LLVM thread pool or CUDA context would not survive the fork."""
+    from worker.mitsuba_setup import find_libllvm
+
+    # As load_mitsuba() does: Dr.Jit must see libLLVM 19 before it is first imported.
+    libllvm = find_libllvm()
+    if "DRJIT_LIBLLVM_PATH" not in os.environ and libllvm is not None:
+        os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    import mitsuba  # noqa: F401
+
+    import worker.render.api  # noqa: F401
+
+
 def _context() -> tuple[JobService, RQJob]:
     rq_job = get_current_job()
     if rq_job is None:
@@ -78,8 +93,7 @@ def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> tuple[dict[st
     inputs = jobs.store.list(input_prefix)
     for info in inputs:
         jobs.store.get_file(info.key, bundle_dir / info.key[len(input_prefix) :])
-    scene = json.loads(jobs.store.get_bytes(scene_key(job_id)))
-    return scene, bundle_dir if inputs else None
+    return jobs.scene(job_id), bundle_dir if inputs else None
 
 
 def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
@@ -202,6 +216,7 @@ def merge_task(job_id: str) -> dict[str, Any]:
     merge_s = time.monotonic() - started_s
     jobs.chunk_finished(job_id, "merge", samples=0, seconds=merge_s)
     jobs.store.put_bytes(f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id))
+    jobs.store.put_bytes(scene_key(job_id), json.dumps(scene, indent=1).encode())  # provenance
     finished_at = time.time()
     # The manifest is in place before the status says succeeded, so a client never misses it.
     _write_manifest(jobs, job_id, {"status": "succeeded", "progress": 1.0})

@@ -163,7 +163,9 @@ def serve_command(args: argparse.Namespace) -> int:
         # The regression scheduler (issue 7), leader-elected: several `serve` processes fire each run once.
         scheduler = start_scheduler_thread(settings)[0] if settings.regression_scheduler else None
         try:
-            uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level="warning")
+            uvicorn.run(
+                create_app(settings), host=args.host, port=args.port, log_level="warning", access_log=False
+            )
         finally:
             if scheduler is not None:
                 scheduler.stop_event.set()
@@ -177,8 +179,11 @@ def serve_command(args: argparse.Namespace) -> int:
 def worker_command(args: argparse.Namespace) -> int:
     from service.core.config import Settings
     from service.queue_worker import run_worker
+    from worker.tasks import preload_renderer
 
-    return run_worker(Settings(), burst=args.burst, name=args.name)
+    settings = Settings()
+    preload_renderer()  # forked work horses inherit the imported renderer
+    return run_worker(settings, burst=args.burst, name=args.name)
 
 
 # ---- client side ---------------------------------------------------------------------------------------

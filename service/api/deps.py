@@ -14,7 +14,7 @@ import redis
 from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from service.auth import LOCAL_DEVELOPER, AuthenticationError, Principal, TokenRegistry
+from service.auth import LOCAL_DEVELOPER, AuthenticationError, Principal, RequestAuthenticator, TokenRegistry
 from service.core.config import Settings
 from service.jobs import JobNotFoundError, JobService
 from service.models import JobView
@@ -25,23 +25,24 @@ _bearer = HTTPBearer(
 )
 
 
-def get_settings(request: Request) -> Settings:
+# Plain async functions: FastAPI would run sync ones in its thread pool, a hop per dependency.
+async def get_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
-def get_redis(request: Request) -> redis.Redis:
+async def get_redis(request: Request) -> redis.Redis:
     return request.app.state.redis
 
 
-def get_store(request: Request) -> ArtifactStore:
+async def get_store(request: Request) -> ArtifactStore:
     return request.app.state.store
 
 
-def get_jobs(request: Request) -> JobService:
+async def get_jobs(request: Request) -> JobService:
     return request.app.state.jobs
 
 
-def get_tokens(request: Request) -> TokenRegistry:
+async def get_tokens(request: Request) -> TokenRegistry:
     return request.app.state.tokens
 
 
@@ -52,25 +53,23 @@ JobsDep = Annotated[JobService, Depends(get_jobs)]
 TokensDep = Annotated[TokenRegistry, Depends(get_tokens)]
 
 
-def current_principal(
-    settings: SettingsDep,
-    tokens: TokensDep,
+async def current_principal(
+    request: Request,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
 ) -> Principal:
-    """The caller, authenticated and counted against its rate limit."""
-    if not settings.auth_enabled:
+    """The caller, authenticated and counted against its rate limit (one Redis round trip)."""
+    if not request.app.state.settings.auth_enabled:
         return LOCAL_DEVELOPER
     if credentials is None or credentials.scheme.lower() != "bearer":
         raise AuthenticationError("authorization: missing bearer token")
-    principal = tokens.authenticate(credentials.credentials)
-    tokens.check_rate_limit(principal, settings.rate_limit_per_minute)
-    return principal
+    authenticator: RequestAuthenticator = request.app.state.authenticator
+    return await authenticator(credentials.credentials)
 
 
 def require(scope: str) -> Callable[..., Principal]:
     """A dependency that returns the caller if its token has ``scope`` (403 otherwise)."""
 
-    def dependency(principal: Annotated[Principal, Depends(current_principal)]) -> Principal:
+    async def dependency(principal: Annotated[Principal, Depends(current_principal)]) -> Principal:
         principal.require(scope)
         return principal
 
@@ -83,10 +82,13 @@ Submitter = Annotated[Principal, Depends(require("submit"))]
 Admin = Annotated[Principal, Depends(require("admin"))]
 
 
-def visible_job(jobs: JobService, principal: Principal, job_id: str) -> JobView:
+def ensure_visible(view: JobView | None, principal: Principal, job_id: str) -> JobView:
     """The job if it exists and the caller may see it; otherwise JobNotFoundError (404: other owners'
     jobs are indistinguishable from missing ones)."""
-    view = jobs.get(job_id)
     if view is None or not principal.can_see(view.owner):
         raise JobNotFoundError(job_id)
     return view
+
+
+def visible_job(jobs: JobService, principal: Principal, job_id: str) -> JobView:
+    return ensure_visible(jobs.get(job_id), principal, job_id)

@@ -12,7 +12,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 
 from schemas import SceneLimits
-from service.api.deps import JobsDep, Reader, StoreDep, Submitter, visible_job
+from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
 from service.events import job_events
 from service.jobs import JobNotFoundError, artifact_prefix
 from service.models import (
@@ -135,8 +135,10 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobView, summary="Job status and progress", responses=_ERRORS)
-def get_job(job_id: JobId, jobs: JobsDep, principal: Reader) -> JobView:
-    return visible_job(jobs, principal, job_id)
+async def get_job(job_id: JobId, jobs: JobsDep, principal: Reader) -> Response:
+    view = ensure_visible(await jobs.aget(job_id), principal, job_id)
+    # Already a validated model: serialise once instead of FastAPI's re-validation of the return value.
+    return Response(view.model_dump_json(), media_type="application/json")
 
 
 @router.post(
