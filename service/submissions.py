@@ -53,10 +53,11 @@ def scene_from_upload(
     from schemas.usd_import import import_usd_isolated
 
     with tempfile.TemporaryDirectory(prefix="hgrender-upload-") as tmp:
-        upload_path = Path(tmp) / f"scene{suffix}"
-        upload_path.write_bytes(content)
         bundle_dir = Path(tmp) / "bundle"
         bundle_dir.mkdir()
+        # A .zip is extracted into the (empty) bundle folder; a single layer lives inside it.
+        upload_path = Path(tmp) / "upload.zip" if suffix == ".zip" else bundle_dir / f"scene{suffix}"
+        upload_path.write_bytes(content)
         scene = import_usd_isolated(upload_path, bundle_dir, limits, limits.usd_timeout_s)
         files = {
             path.relative_to(bundle_dir).as_posix(): path.read_bytes()

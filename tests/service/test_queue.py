@@ -7,6 +7,7 @@ kills) use more samples so that the render is still running when the test acts.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import time
@@ -200,3 +201,27 @@ def test_two_workers_drain_20_jobs_without_running_any_twice(live_service: LiveS
     workers = {w for job_id in job_ids for w in client.get(job_id)["workers"]}
     assert workers == {"d1", "d2"}
     service.stop_workers()
+
+
+def test_multipart_uploads_of_json_and_usd_render(two_workers: LiveService, tmp_path: Path) -> None:
+    """A scene uploaded as a .json file and as a USD layer (exported from the same scene) both render;
+    the USD import keeps the film, so the job's spp is the scene's."""
+    from schemas import validate_scene
+    from schemas.usd_export import scene_to_usd
+
+    if not two_workers.workers:
+        two_workers.start_worker("w-upload")
+    client = two_workers.client()
+    scene = tiny_scene()
+    json_path = tmp_path / "scene.json"
+    json_path.write_text(json.dumps(scene))
+    usd_path = scene_to_usd(validate_scene(scene), tmp_path / "scene.usda")
+    for path in (json_path, usd_path):
+        job_id = client.submit(path, chunks=1, priority="high")["id"]
+        final = client.wait(job_id, timeout_s=180)
+        assert final["status"] == "succeeded", (path.name, final.get("error"))
+        assert final["spp"] == scene["film"]["spp"] and final["priority"] == "high"
+    bad = tmp_path / "scene.txt"
+    bad.write_text("nope")
+    response = client.http.post("/v1/jobs", files={"scene": (bad.name, bad.read_bytes())})
+    assert response.status_code == 422 and response.json()["detail"].startswith("scene:")
