@@ -59,7 +59,7 @@ export class PixelInspector {
   }
 
   renderSlot(slot, pixel) {
-    const box = this.root.querySelector(`[data-slot="${slot}"]`);
+    const box = this.root.querySelector(`.pixels > [data-slot="${slot}"]`);
     box.hidden = !pixel;
     if (!pixel) return;
     box.querySelector(".pixel-title").textContent = `Pixel ${slot}: (${pixel.x}, ${pixel.y})`;

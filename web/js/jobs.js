@@ -208,8 +208,8 @@ export class JobsPanel {
       for (const [key, value] of Object.entries(options)) if (value != null) body[key] = value;
       created = await this.api.postJson("/v1/jobs", body);
     }
-    this.root.querySelector("#submit-status").textContent = `submitted ${created.id}`;
     await this.refresh();
+    this.root.querySelector("#submit-status").textContent = `submitted ${created.id}`;
     return created.id;
   }
 }

@@ -163,6 +163,8 @@ export class ImageViewer {
   applyTransform() {
     const { zoom, panX, panY } = this.state;
     this.stage.style.transform = `translate(${panX}px, ${panY}px) scale(${zoom})`;
+    // Strokes are in image pixels (the overlay is scaled with the image): keep them 1.5 screen pixels.
+    this.overlay.style.strokeWidth = String(1.5 / zoom);
     this.root.querySelector("#zoom-label").textContent = `${Math.round(zoom * 100)}%`;
   }
 
@@ -260,6 +262,7 @@ export class ImageViewer {
     }
     this.canvas.getContext("2d").putImageData(image, 0, 0);
     this.canvas.dataset.mode = mode;
+    this.canvas.setAttribute("aria-label", `rendered image: ${this.controls.mode.selectedOptions[0]?.textContent ?? mode}`);
     this.canvas.dataset.drawn = String((Number(this.canvas.dataset.drawn) || 0) + 1);
   }
 
@@ -326,7 +329,6 @@ export class ImageViewer {
       shape.setAttribute("stroke", `rgb(${r},${g},${b})`);
       shape.setAttribute("fill", `rgb(${r},${g},${b})`);
       shape.setAttribute("fill-opacity", "0.2");
-      shape.setAttribute("vector-effect", "non-scaling-stroke");
       Object.assign(shape.dataset, {
         x: e.x,
         y: e.y,

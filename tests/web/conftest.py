@@ -1,0 +1,244 @@
+"""Fixtures of the viewer tests: a live ``hgrender serve`` subprocess (auth on, private Redis, one worker,
+temporary data dir, free port), tiny rendered jobs of a plane under a cylinder light, their EXRs read
+with OpenImageIO, and headless Chromium (Debian's ``/usr/bin/chromium``) driven by Playwright."""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from hgrender.client import HgrenderClient
+from service.redis_server import free_loopback_port
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+ARTIFACTS_DIR = REPO_ROOT / "test-artifacts"
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+SIZE_PX = 24
+SPP = 4
+
+# A diffuse plane (y = 0) seen straight from above (camera up = world −z, so image +x = world +x and
+# image up = world −z) under a thin cylinder light along world x. The cylinder's transverse extent is
+# long along x and 2R across, so coherence is short along x and long across: ℓ₁ ⟂ the axis, i.e. along
+# image y (vertical ellipses, angle = ±π/2). By the mirror symmetry of the scene about the plane z = 0
+# through each floor point's direction to the cylinder, this holds at every floor pixel.
+CYLINDER_SCENE: dict[str, Any] = {
+    "schema": "hgrender/scene/v1",
+    "name": "plane under a cylinder light",
+    "camera": {
+        "type": "perspective",
+        "origin_m": [0, 1.0, 0],
+        "target_m": [0, 0, 0],
+        "up": [0, 0, -1],
+        "fov_deg": 40,
+    },
+    "film": {"width": SIZE_PX, "height": SIZE_PX, "bands": 8, "spp": SPP},
+    "materials": {"floor": {"type": "diffuse", "reflectance": 0.5}},
+    "shapes": [
+        {
+            "type": "rectangle",
+            "material": "floor",
+            "center_m": [0, 0, 0],
+            "normal": [0, 1, 0],
+            "up": [0, 0, -1],
+            "width_m": 2,
+            "height_m": 2,
+        }
+    ],
+    "emitters": [
+        {
+            "type": "cylinder",
+            "p0_m": [-0.3, 0.5, 0],
+            "p1_m": [0.3, 0.5, 0],
+            "radius_m": 0.002,
+            "spectrum": {"type": "cie_f", "name": "F11"},
+            "power_w": 10,
+        }
+    ],
+}
+
+
+def cylinder_scene(**film: Any) -> dict[str, Any]:
+    scene = copy.deepcopy(CYLINDER_SCENE)
+    scene["film"].update(film)
+    return scene
+
+
+@dataclass
+class ExrImage:
+    """Channels of an EXR read with OpenImageIO: name → float32 (H, W)."""
+
+    channels: dict[str, np.ndarray]
+
+    @property
+    def rgb(self) -> np.ndarray:
+        return np.stack([self.channels[c] for c in "RGB"], axis=-1)
+
+    def band_names(self) -> list[str]:
+        names = [n for n in self.channels if n.startswith("S0.")]
+        return sorted(names, key=lambda n: float(n[3:-2].replace(",", ".")))
+
+
+def read_exr(path: Path) -> ExrImage:
+    import OpenImageIO as oiio
+
+    image_input = oiio.ImageInput.open(str(path))
+    assert image_input is not None, oiio.geterror()
+    spec = image_input.spec()
+    pixels = image_input.read_image(format="float")
+    image_input.close()
+    return ExrImage({name: pixels[..., i] for i, name in enumerate(spec.channelnames)})
+
+
+@dataclass
+class Served:
+    """A running ``hgrender serve`` and an admin client for it."""
+
+    base_url: str
+    token: str
+    data_dir: Path
+    client: HgrenderClient
+
+    def get(self, path: str, token: str | None = None, **params: Any) -> httpx.Response:
+        headers = {"Authorization": f"Bearer {token if token is not None else self.token}"}
+        return httpx.get(self.base_url + path, headers=headers, params=params, timeout=60)
+
+    def render(self, scene: dict[str, Any], name: str, **options: Any) -> str:
+        """Submit and wait for success; returns the job id."""
+        job = self.client.submit(scene, name=name, **options)
+        final = self.client.wait(job["id"], timeout_s=120)
+        assert final["status"] == "succeeded", final
+        return job["id"]
+
+
+@pytest.fixture(scope="session")
+def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
+    """``hgrender serve`` as users run it (a private Redis because REDIS_URL is unset), auth on."""
+    data_dir = tmp_path_factory.mktemp("viewer-data")
+    port = free_loopback_port()
+    env = {k: v for k, v in os.environ.items() if k not in ("REDIS_URL", "HGRENDER_REDIS_URL")}
+    env |= {"HGRENDER_AUTH": "on", "HGRENDER_PROGRESS_INTERVAL_S": "0.1", "HGRENDER_DEFAULT_CHUNKS": "2"}
+    # The console script's interpreter with the repository on sys.path (as worker_command_line does).
+    command = [sys.executable, "-c", "import sys; from hgrender.cli import main; sys.exit(main())"]
+    command += [
+        "serve",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        "--data-dir",
+        str(data_dir),
+        "--workers",
+        "1",
+    ]
+    log = (data_dir / "serve.log").open("wb")
+    process = subprocess.Popen(
+        command, cwd=REPO_ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+    )
+    base_url = f"http://127.0.0.1:{port}"
+    token_file = data_dir / "admin.token"
+    deadline = time.monotonic() + 60
+    while True:
+        if process.poll() is not None:
+            raise RuntimeError(f"hgrender serve exited: {(data_dir / 'serve.log').read_text()[-2000:]}")
+        with contextlib.suppress(httpx.HTTPError):
+            if token_file.exists() and httpx.get(base_url + "/healthz", timeout=2).status_code == 200:
+                break
+        if time.monotonic() > deadline:
+            raise RuntimeError("hgrender serve did not become healthy within 60 s")
+        time.sleep(0.2)
+    token = token_file.read_text().strip()
+    client = HgrenderClient(base_url, token=token)
+    try:
+        yield Served(base_url, token, data_dir, client)
+    finally:
+        client.close()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGTERM)
+        try:
+            process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+        log.close()
+
+
+@dataclass
+class RenderedJob:
+    job_id: str
+    exr: ExrImage
+
+
+@pytest.fixture(scope="session")
+def cylinder_job(served: Served, tmp_path_factory: pytest.TempPathFactory) -> RenderedJob:
+    job_id = served.render(cylinder_scene(), "cylinder")
+    out_dir = tmp_path_factory.mktemp("cylinder-job")
+    served.client.download(job_id, "image.exr", out_dir / "image.exr")
+    return RenderedJob(job_id, read_exr(out_dir / "image.exr"))
+
+
+@pytest.fixture(scope="session")
+def cylinder_job_reseeded(served: Served, tmp_path_factory: pytest.TempPathFactory) -> RenderedJob:
+    """The same scene with another seed: a different noise pattern to compare against."""
+    job_id = served.render(cylinder_scene(seed=7), "cylinder seed 7")
+    out_dir = tmp_path_factory.mktemp("cylinder-job-7")
+    served.client.download(job_id, "image.exr", out_dir / "image.exr")
+    return RenderedJob(job_id, read_exr(out_dir / "image.exr"))
+
+
+@pytest.fixture(scope="session")
+def chromium() -> Iterator[Any]:
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is absent (install it with `make system-packages`)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
+
+
+@pytest.fixture
+def page(chromium: Any, served: Served) -> Iterator[Any]:
+    """A 1280×800 page with the admin token in localStorage; fails the test on page errors."""
+    context = chromium.new_context(viewport={"width": 1280, "height": 800})
+    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {served.token!r});")
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    try:
+        yield page
+    finally:
+        context.close()
+    assert not errors, f"page errors: {errors}"
+
+
+def screenshot(page: Any, name: str) -> Path:
+    ARTIFACTS_DIR.mkdir(exist_ok=True)
+    path = ARTIFACTS_DIR / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path

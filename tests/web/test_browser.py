@@ -1,0 +1,338 @@
+"""The viewer in headless Chromium against a live ``hgrender serve``: canvas pixels against the server's
+display transform, exposure, the wavelength slider, coherence ellipses of a cylinder light, the pixel
+inspector, live progress of a running job, the compare view, keyboard access and a narrow viewport.
+
+Screenshots go to ``test-artifacts/``. Tolerances: the canvas is written from the same float32 data with
+the same formulas in double precision (JS) as ``hgrender.imaging`` (NumPy), so 8-bit values agree except
+where a value lands within rounding of a quantisation boundary: ±1 level.
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from hgrender.imaging import display_rgb8
+from tests.web.conftest import SIZE_PX, RenderedJob, Served, screenshot
+
+pytestmark = pytest.mark.browser
+
+# Matt Zucker's polynomial fit of viridis, as in web/js/colormap.js (the canvas must show exactly it).
+VIRIDIS = np.array(
+    [
+        [0.2777273272234177, 0.005407344544966578, 0.3340998053353061],
+        [0.1050930431085774, 1.404613529898575, 1.384590162594685],
+        [-0.3308618287255563, 0.214847559468213, 0.09509516302823659],
+        [-4.634230498983486, -5.799100973351585, -19.33244095627987],
+        [6.228269936347081, 14.17993336680509, 56.69055260068105],
+        [4.776384997670288, -13.74514537774601, -65.35303263337234],
+        [-5.435455855934631, 4.645852612178535, 26.3124352495832],
+    ]
+)
+
+
+def viridis8(t: np.ndarray) -> np.ndarray:
+    t = np.clip(np.nan_to_num(t), 0.0, 1.0)[..., None]
+    value = np.zeros((*t.shape[:-1], 3)) + VIRIDIS[6]
+    for k in range(5, -1, -1):
+        value = VIRIDIS[k] + t * value
+    return np.floor(np.clip(value, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
+
+
+def canvas_rgb(page: Any, selector: str = "#image-canvas") -> np.ndarray:
+    """The canvas's pixels (H, W, 3) as 8-bit values."""
+    data = page.evaluate(
+        """(selector) => {
+            const canvas = document.querySelector(selector);
+            const pixels = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height);
+            return {width: canvas.width, height: canvas.height, data: Array.from(pixels.data)};
+        }""",
+        selector,
+    )
+    rgba = np.array(data["data"], dtype=np.int64).reshape(data["height"], data["width"], 4)
+    return rgba[..., :3]
+
+
+def open_viewer(page: Any, served: Served, job_id: str) -> None:
+    page.goto(f"{served.base_url}/#/view/{job_id}")
+    page.wait_for_function("() => Number(document.querySelector('#image-canvas').dataset.drawn) >= 1")
+
+
+def redrawn(page: Any, count_before: int) -> None:
+    page.wait_for_function(
+        "(n) => Number(document.querySelector('#image-canvas').dataset.drawn) > n", arg=count_before
+    )
+
+
+def drawn_count(page: Any) -> int:
+    return int(page.get_attribute("#image-canvas", "data-drawn"))
+
+
+def test_canvas_matches_server_display_and_exposure(
+    page: Any, served: Served, cylinder_job: RenderedJob
+) -> None:
+    open_viewer(page, served, cylinder_job.job_id)
+    shown = canvas_rgb(page)
+    png = served.get(f"/v1/jobs/{cylinder_job.job_id}/display.png", ev=0, tonemap="clamp").content
+    server = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int64)
+    assert shown.shape == (SIZE_PX, SIZE_PX, 3)
+    assert np.abs(shown - server).max() <= 1
+    screenshot(page, "viewer_srgb")
+
+    # +2 EV: every linear value ×4; the canvas follows display_rgb8(rgb, 2) and differs from EV 0.
+    count = drawn_count(page)
+    page.fill("#ev-slider", "2")
+    redrawn(page, count)
+    brighter = canvas_rgb(page)
+    expected = display_rgb8(cylinder_job.exr.rgb, 2.0, "clamp").astype(np.int64)
+    assert np.abs(brighter - expected).max() <= 1
+    assert (brighter.sum(axis=-1) >= shown.sum(axis=-1)).all() and (brighter > shown + 1).any()
+    count = drawn_count(page)
+    page.select_option("#tonemap", "aces")
+    redrawn(page, count)
+    expected = display_rgb8(cylinder_job.exr.rgb, 2.0, "aces").astype(np.int64)
+    assert np.abs(canvas_rgb(page) - expected).max() <= 1
+    assert page.inner_text("#ev-label") == "2.0 EV"
+
+
+def test_wavelength_slider_switches_bands(page: Any, served: Served, cylinder_job: RenderedJob) -> None:
+    open_viewer(page, served, cylinder_job.job_id)
+    catalogue = served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()
+    layers = {layer["name"]: layer for layer in catalogue["layers"]}
+    bands = cylinder_job.exr.band_names()
+    count = drawn_count(page)
+    page.select_option("#display-mode", "band")
+    redrawn(page, count)
+    seen = []
+    for index in (1, 5):
+        count = drawn_count(page)
+        page.fill("#band-slider", str(index))
+        redrawn(page, count)
+        info = layers[bands[index]]
+        # The band's values mapped linearly over its [p01, p99] onto viridis.
+        t = (cylinder_job.exr.channels[bands[index]].astype(np.float64) - info["p01"]) / (
+            info["p99"] - info["p01"]
+        )
+        shown = canvas_rgb(page)
+        assert np.abs(shown - viridis8(t)).max() <= 1, bands[index]
+        assert page.inner_text("#band-label") == f"{info['wavelength_nm']:.1f} nm"
+        seen.append(shown)
+        screenshot(page, f"viewer_band_{index}")
+    assert np.abs(seen[0] - seen[1]).max() > 10  # two different bands, two different pictures
+
+
+def test_diagnostic_layer_uses_covered_pixels_and_legend(
+    page: Any, served: Served, cylinder_job: RenderedJob
+) -> None:
+    open_viewer(page, served, cylinder_job.job_id)
+    count = drawn_count(page)
+    page.select_option("#display-mode", "coherence.l1_um")
+    redrawn(page, count)
+    info = next(
+        layer
+        for layer in served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["layers"]
+        if layer["name"] == "coherence.l1_um"
+    )
+    exr = cylinder_job.exr.channels
+    covered = exr["coherence.weight"] > 0
+    expected = viridis8((exr["coherence.l1_um"] - info["p01"]) / (info["p99"] - info["p01"]))
+    expected[~covered] = 40  # uncovered pixels: dark grey
+    assert np.abs(canvas_rgb(page) - expected).max() <= 1
+    assert "µm" in page.inner_text("#legend")
+    screenshot(page, "viewer_l1")
+
+
+def test_ellipses_are_vertical_for_a_cylinder_light(
+    page: Any, served: Served, cylinder_job: RenderedJob
+) -> None:
+    open_viewer(page, served, cylinder_job.job_id)
+    page.fill("#ellipse-spacing", "6")
+    page.dispatch_event("#ellipse-spacing", "change")
+    page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
+    page.wait_for_timeout(200)
+    shapes = page.evaluate(
+        """() => [...document.querySelectorAll('#ellipse-overlay ellipse')].map((e) => {
+            const box = e.getBoundingClientRect();
+            return {x: Number(e.dataset.x), y: Number(e.dataset.y), angle: Number(e.dataset.angle),
+                    rx: Number(e.getAttribute('rx')), ry: Number(e.getAttribute('ry')),
+                    width: box.width, height: box.height, transform: e.getAttribute('transform')};
+        })"""
+    )
+    grid = served.get(f"/v1/jobs/{cylinder_job.job_id}/ellipses", spacing=6).json()["ellipses"]
+    assert len(shapes) == len(grid) >= 8
+    angle = cylinder_job.exr.channels["coherence.angle"]
+    for shape in shapes:
+        assert shape["angle"] == pytest.approx(float(angle[shape["y"], shape["x"]]), abs=1e-7)
+        assert shape["rx"] > shape["ry"]  # the ℓ₁ semi-axis is the longer one
+        # Drawn on screen: taller than wide (ℓ₁ vertical), the rotation is −angle in SVG's y-down frame.
+        assert shape["height"] > 1.5 * shape["width"]
+        assert shape["transform"].startswith(f"rotate({-shape['angle'] * 180 / np.pi}")
+    page.hover("#ellipse-overlay ellipse >> nth=0")
+    assert "ℓ₁" in page.inner_text("#ellipse-info")
+    screenshot(page, "viewer_ellipses")
+
+
+def test_inspector_spectrum_equals_the_exr(page: Any, served: Served, cylinder_job: RenderedJob) -> None:
+    open_viewer(page, served, cylinder_job.job_id)
+    exr = cylinder_job.exr
+    covered = np.argwhere(exr.channels["coherence.weight"] > 0)
+    y, x = (int(v) for v in covered[len(covered) // 3])
+    box = page.locator("#image-canvas").bounding_box()
+    scale = box["width"] / SIZE_PX
+    page.mouse.click(box["x"] + (x + 0.5) * scale, box["y"] + (y + 0.5) * scale)
+    page.wait_for_selector('#spectrum-plot circle[data-slot="A"]')
+    points = page.evaluate(
+        """() => [...document.querySelectorAll('#spectrum-plot circle[data-slot="A"]')]
+            .map((c) => [Number(c.dataset.wavelengthNm), Number(c.dataset.value)])"""
+    )
+    bands = exr.band_names()
+    assert [p[0] for p in points] == [float(n[3:-2].replace(",", ".")) for n in bands]
+    np.testing.assert_array_equal([p[1] for p in points], [float(exr.channels[n][y, x]) for n in bands])
+    assert page.inner_text('[data-slot="A"] .pixel-title') == f"Pixel A: ({x}, {y})"
+    l1_row = page.get_attribute('[data-slot="A"] tr[data-key="l1_um"]', "data-value")
+    assert float(l1_row) == float(exr.channels["coherence.l1_um"][y, x])
+    # Second pixel (slot B), by keyboard-accessible form: two spectra in the plot.
+    page.check('input[name="inspect-slot"][value="B"]')
+    page.fill("#inspect-x", "0")
+    page.fill("#inspect-y", "0")
+    page.press("#inspect-y", "Enter")
+    page.wait_for_selector('#spectrum-plot circle[data-slot="B"]')
+    assert page.inner_text('[data-slot="B"] .pixel-title') == "Pixel B: (0, 0)"
+    screenshot(page, "viewer_inspector")
+
+
+def test_running_job_progress_bar_advances(page: Any, served: Served) -> None:
+    page.goto(f"{served.base_url}/#/jobs")
+    page.wait_for_function("() => document.querySelector('#scene-example').options.length > 1")
+    page.select_option("#scene-example", "thin_film_cylinder_light.json")
+    page.fill("#override-spp", "64")
+    page.fill("#override-width", "48")
+    page.fill("#override-height", "48")
+    page.fill("#override-chunks", "4")
+    page.fill("#job-name", "progress test")
+    page.click("#submit-job")
+    page.wait_for_function(
+        "() => document.querySelector('#submit-status').textContent.startsWith('submitted')"
+    )
+    job_id = page.inner_text("#submit-status").split()[-1]
+    row = f'tr[data-job-id="{job_id}"]'
+    page.wait_for_selector(row)
+    values: list[float] = []
+    deadline = time.monotonic() + 120
+    running_seen = False
+    while time.monotonic() < deadline:
+        values.append(float(page.evaluate(f"() => document.querySelector('{row} progress').value")))
+        status = page.get_attribute(row, "data-status")
+        if status == "running" and not running_seen:
+            running_seen = True
+            # While running the image endpoints answer 409 (no image yet).
+            assert served.get(f"/v1/jobs/{job_id}/layers").status_code == 409
+            screenshot(page, "jobs_running")
+        if status in ("succeeded", "failed", "canceled"):
+            break
+        page.wait_for_timeout(50)
+    assert page.get_attribute(row, "data-status") == "succeeded"
+    values.append(float(page.evaluate(f"() => document.querySelector('{row} progress').value")))
+    intermediate = sorted({v for v in values if 0.0 < v < 1.0})
+    # 4 chunks on one worker: at least the 25 %, 50 %, 75 % steps are shown before 100 %.
+    assert len(intermediate) >= 2, values
+    assert values == sorted(values)  # never goes backwards
+    assert values[-1] == 1.0
+    assert "samples/s" in page.inner_text(f"{row} .job-rate")
+    screenshot(page, "jobs_done")
+
+
+def test_compare_view_shows_delta_e(
+    page: Any, served: Served, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
+) -> None:
+    page.goto(f"{served.base_url}/#/jobs")
+    a, b = cylinder_job.job_id, cylinder_job_reseeded.job_id
+    page.wait_for_selector(f'tr[data-job-id="{a}"]')
+    page.check(f'tr[data-job-id="{a}"] .job-select')
+    page.check(f'tr[data-job-id="{b}"] .job-select')
+    page.click("#compare-selected")
+    page.wait_for_function("() => Number(document.querySelector('.compare')?.dataset.ready) >= 1")
+    left = canvas_rgb(page, ".compare-left")
+    assert np.abs(left - display_rgb8(cylinder_job.exr.rgb, 0.0, "clamp")).max() <= 1
+    page.fill(".compare-split", "30")
+    screenshot(page, "compare_split")
+    page.select_option(".compare-mode", "de2000")
+    page.wait_for_function("() => Number(document.querySelector('.compare').dataset.ready) >= 2")
+    response = served.get("/v1/compare", a=a, b=b, mode="de2000")
+    import json
+
+    stats = json.loads(response.headers["X-Stats"])
+    assert float(page.get_attribute(".compare-stats", "data-mean")) == pytest.approx(stats["mean"], rel=1e-12)
+    assert "ΔE₀₀" in page.inner_text(".compare-stats")
+    diff = np.frombuffer(response.content, dtype="<f4").reshape(SIZE_PX, SIZE_PX)
+    assert np.abs(canvas_rgb(page, ".compare-diff") - viridis8(diff / 10.0)).max() <= 1
+    screenshot(page, "compare_de2000")
+
+
+def test_controls_are_labelled_and_keyboard_reachable(
+    page: Any, served: Served, cylinder_job: RenderedJob
+) -> None:
+    open_viewer(page, served, cylinder_job.job_id)
+    unlabelled = page.evaluate(
+        """() => [...document.querySelectorAll('input, select, button, canvas, [tabindex]')]
+            .filter((e) => e.offsetParent !== null)
+            .filter((e) => !(e.labels && e.labels.length) && !e.getAttribute('aria-label')
+                           && !(e.tagName === 'BUTTON' && e.textContent.trim()))
+            .map((e) => e.outerHTML.slice(0, 80))"""
+    )
+    assert unlabelled == []
+    order = []
+    page.focus("#token")
+    for _ in range(40):
+        page.keyboard.press("Tab")
+        order.append(page.evaluate("() => document.activeElement.id || document.activeElement.tagName"))
+    for control in (
+        "display-mode",
+        "band-slider",
+        "ev-slider",
+        "tonemap",
+        "ellipse-spacing",
+        "viewport",
+        "inspect-x",
+    ):
+        assert control in order, order
+    # Tab order follows the visual order of the controls.
+    assert (
+        order.index("display-mode")
+        < order.index("ev-slider")
+        < order.index("viewport")
+        < order.index("inspect-x")
+    )
+    page.focus("#viewport")
+    before = page.inner_text("#zoom-label")
+    page.keyboard.press("+")
+    assert page.inner_text("#zoom-label") != before
+    # Arrow keys move the exposure slider by its step (0.5 EV).
+    page.focus("#ev-slider")
+    page.keyboard.press("ArrowRight")
+    assert page.inner_text("#ev-label") == "0.5 EV"
+
+
+def test_narrow_viewport_has_no_horizontal_overflow(
+    chromium: Any, served: Served, cylinder_job: RenderedJob
+) -> None:
+    context = chromium.new_context(viewport={"width": 375, "height": 667}, device_scale_factor=2)
+    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {served.token!r});")
+    page = context.new_page()
+    try:
+        for route, name in (("#/jobs", "narrow_jobs"), (f"#/view/{cylinder_job.job_id}", "narrow_viewer")):
+            page.goto(f"{served.base_url}/{route}")
+            page.wait_for_load_state("networkidle")
+            page.wait_for_timeout(300)
+            widths = page.evaluate(
+                "() => [document.documentElement.scrollWidth, document.documentElement.clientWidth]"
+            )
+            assert widths[0] <= widths[1], (route, widths)
+            screenshot(page, name)
+    finally:
+        context.close()

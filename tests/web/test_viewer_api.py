@@ -1,0 +1,196 @@
+"""Viewer data endpoints against the rendered EXR read independently with OpenImageIO.
+
+Values served from the decoded EXR are float32 copies, so they must be bit-identical (f32) or within
+half-precision rounding (f16: relative 2⁻¹¹, plus the f16 subnormal spacing 2⁻²⁴ near zero).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+
+import numpy as np
+from PIL import Image
+
+from hgrender.imaging import display_rgb8, tone_map
+from service.store.filesystem import FilesystemStore
+from service.viewer_data import DecodedImageCache
+from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene
+
+
+def _floats(response, dtype: str = "<f4") -> np.ndarray:
+    assert response.status_code == 200, response.text
+    height, width = int(response.headers["X-Height"]), int(response.headers["X-Width"])
+    channels = int(response.headers.get("X-Channels", 1))
+    values = np.frombuffer(response.content, dtype=dtype).astype(np.float32)
+    return values.reshape(height, width, channels) if channels > 1 else values.reshape(height, width)
+
+
+def test_layer_catalogue_lists_bands_rgb_and_diagnostics(served: Served, cylinder_job: RenderedJob) -> None:
+    response = served.get(f"/v1/jobs/{cylinder_job.job_id}/layers")
+    assert response.status_code == 200, response.text
+    catalogue = response.json()
+    assert (catalogue["width"], catalogue["height"]) == (SIZE_PX, SIZE_PX)
+    bands = cylinder_job.exr.band_names()
+    assert catalogue["wavelengths_nm"] == [float(n[3:-2].replace(",", ".")) for n in bands]
+    layers = {layer["name"]: layer for layer in catalogue["layers"]}
+    assert [n for n in layers if n.startswith("S0.")] == bands
+    assert layers["rgb"]["channels"] == 3
+    assert layers["coherence.l1_um"]["unit"] == "µm"
+    assert layers["coherence.area_um2"]["unit"] == "µm²"
+    assert layers["coherence.r_m"]["unit"] == "m"
+    assert layers[bands[0]]["unit"] == "W·m⁻²·sr⁻¹·nm⁻¹"
+    band = cylinder_job.exr.channels[bands[3]]
+    assert layers[bands[3]]["min"] == float(band.min())
+    assert layers[bands[3]]["max"] == float(band.max())
+    # Diagnostics' ranges are over covered pixels only (weight > 0): uncovered pixels hold zeros.
+    covered = cylinder_job.exr.channels["coherence.weight"] > 0
+    assert covered.any()
+    assert layers["coherence.l1_um"]["min"] == float(
+        cylinder_job.exr.channels["coherence.l1_um"][covered].min()
+    )
+
+
+def test_layer_arrays_equal_the_exr_in_f32_f16_and_downsampled(
+    served: Served, cylinder_job: RenderedJob
+) -> None:
+    exr = cylinder_job.exr
+    job = cylinder_job.job_id
+    band = exr.band_names()[3]
+    np.testing.assert_array_equal(_floats(served.get(f"/v1/jobs/{job}/layers/{band}")), exr.channels[band])
+    np.testing.assert_array_equal(_floats(served.get(f"/v1/jobs/{job}/layers/rgb")), exr.rgb)
+    half = _floats(served.get(f"/v1/jobs/{job}/layers/{band}", format="f16"), "<f2")
+    np.testing.assert_allclose(half, exr.channels[band], rtol=2.0**-11, atol=2.0**-24)
+    # step 2: radiance layers are 2×2 block means, diagnostics the top-left pixel of each block.
+    expected_mean = exr.channels[band].reshape(SIZE_PX // 2, 2, SIZE_PX // 2, 2).mean(axis=(1, 3))
+    got = _floats(served.get(f"/v1/jobs/{job}/layers/{band}", step=2))
+    np.testing.assert_allclose(got, expected_mean, rtol=1e-6, atol=1e-30)
+    got_l1 = _floats(served.get(f"/v1/jobs/{job}/layers/coherence.l1_um", step=2))
+    np.testing.assert_array_equal(got_l1, exr.channels["coherence.l1_um"][::2, ::2])
+
+
+def test_pixel_record_equals_the_exr(served: Served, cylinder_job: RenderedJob) -> None:
+    exr = cylinder_job.exr
+    covered = np.argwhere(exr.channels["coherence.weight"] > 0)
+    y, x = (int(v) for v in covered[len(covered) // 2])
+    record = served.get(f"/v1/jobs/{cylinder_job.job_id}/pixel", x=x, y=y).json()
+    assert record["spectrum"] == [float(exr.channels[n][y, x]) for n in exr.band_names()]
+    assert record["rgb"] == [float(exr.channels[c][y, x]) for c in "RGB"]
+    assert record["coherence_covered"] is True
+    for name in ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy"):
+        assert record["coherence"][name] == float(exr.channels[f"coherence.{name}"][y, x]), name
+    assert record["depth_m"] == float(exr.channels["depth"][y, x])
+
+
+def test_display_png_is_display_rgb8_of_the_exr(served: Served, cylinder_job: RenderedJob) -> None:
+    for ev, operator in ((0.0, "clamp"), (1.5, "reinhard"), (-2.0, "aces")):
+        response = served.get(f"/v1/jobs/{cylinder_job.job_id}/display.png", ev=ev, tonemap=operator)
+        assert response.headers["content-type"] == "image/png"
+        shown = np.asarray(Image.open(io.BytesIO(response.content)).convert("RGB"))
+        np.testing.assert_array_equal(shown, display_rgb8(cylinder_job.exr.rgb, ev, operator))
+
+
+def test_ellipses_are_the_diagnostics_at_grid_centres_and_vertical(
+    served: Served, cylinder_job: RenderedJob
+) -> None:
+    exr = cylinder_job.exr
+    grid = served.get(f"/v1/jobs/{cylinder_job.job_id}/ellipses", spacing=6).json()
+    covered = exr.channels["coherence.weight"] > 0
+    expected_cells = [(x, y) for y in range(3, SIZE_PX, 6) for x in range(3, SIZE_PX, 6) if covered[y, x]]
+    assert [(e["x"], e["y"]) for e in grid["ellipses"]] == expected_cells
+    assert len(expected_cells) >= 8
+    for ellipse in grid["ellipses"]:
+        x, y = ellipse["x"], ellipse["y"]
+        for name in ("l1_um", "l2_um", "angle", "area_um2"):
+            assert ellipse[name] == float(exr.channels[f"coherence.{name}"][y, x])
+        # ℓ₁ ⟂ the cylinder axis (world x = image x): vertical, |cos angle| = 0 by symmetry; 1e-3 allows
+        # float32 rounding of ½·atan2 of the luminance-weighted (sin 2θ, cos 2θ) sums.
+        assert abs(math.cos(ellipse["angle"])) < 1e-3
+        # The cylinder is 0.6 m long and 4 mm wide: strongly anisotropic coherence (ℓ₁/ℓ₂ ≫ 10).
+        assert ellipse["l1_um"] > 10 * ellipse["l2_um"]
+
+
+def test_compare_modes_against_independent_formulas(
+    served: Served, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
+) -> None:
+    a, b = cylinder_job.exr.rgb.astype(np.float64), cylinder_job_reseeded.exr.rgb.astype(np.float64)
+    ids = {"a": cylinder_job.job_id, "b": cylinder_job_reseeded.job_id}
+    response = served.get("/v1/compare", **ids, mode="abs")
+    absolute = _floats(response)
+    np.testing.assert_allclose(absolute, np.abs(b - a).mean(axis=-1), rtol=1e-6, atol=1e-30)
+    stats = json.loads(response.headers["X-Stats"])
+    assert math.isclose(stats["max"], float(absolute.max()), rel_tol=1e-6)
+    same = _floats(served.get("/v1/compare", a=ids["a"], b=ids["a"], mode="de2000"))
+    np.testing.assert_array_equal(same, 0.0)
+    de = _floats(served.get("/v1/compare", **ids, mode="de2000", ev=-3.0, tonemap="reinhard"))
+    # Independent path: IEC 61966-2-1 sRGB → XYZ matrix (the service inverts the renderer's XYZ → sRGB
+    # matrix; both agree to ~1e-4) and the CIE 1976 L*a*b* formulas; then ΔE00 of the same colour pair
+    # changes by at most ~1e-2 for these 1e-4 input differences.
+    srgb_to_xyz = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
+    white = np.array([0.95047, 1.0, 1.08883])
+
+    def lab(rgb: np.ndarray) -> np.ndarray:
+        t = tone_map(rgb * 2.0**-3.0, "reinhard") @ srgb_to_xyz.T / white
+        f = np.where(t > (6 / 29) ** 3, np.cbrt(t), t / (3 * (6 / 29) ** 2) + 4 / 29)
+        return np.stack(
+            [116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1
+        )
+
+    from hgrender.colour import ciede2000
+
+    np.testing.assert_allclose(de, ciede2000(lab(a), lab(b)), rtol=0, atol=2e-2)
+    assert float(de.max()) > 0.5  # different seeds: visibly different noise
+
+
+def test_viewer_errors_name_the_parameter(served: Served, cylinder_job: RenderedJob) -> None:
+    job = cylinder_job.job_id
+    response = served.get(f"/v1/jobs/{job}/layers/nonsense")
+    assert response.status_code == 422 and response.json()["detail"].startswith("name: ")
+    response = served.get(f"/v1/jobs/{job}/pixel", x=SIZE_PX, y=0)
+    assert response.status_code == 422 and response.json()["detail"].startswith("x: ")
+    response = served.get(f"/v1/jobs/{job}/display.png", tonemap="gamma")
+    assert response.status_code == 422 and response.json()["detail"].startswith("tonemap: ")
+    response = served.get("/v1/compare", a=job, b=job, mode="psnr")
+    assert response.status_code == 422 and response.json()["detail"].startswith("mode: ")
+    assert served.get(f"/v1/jobs/{job}/layers", token="not-a-token").status_code == 401
+    other = served.client.create_token("mallory", ["read", "submit"])["token"]
+    response = served.get(f"/v1/jobs/{job}/layers", token=other)
+    assert response.status_code == 404  # other owners' jobs are indistinguishable from missing ones
+
+
+def test_compare_rejects_images_of_different_sizes(served: Served, cylinder_job: RenderedJob) -> None:
+    small = served.render(cylinder_scene(width=12, height=12, spp=1), "small")
+    response = served.get("/v1/compare", a=cylinder_job.job_id, b=small, mode="abs")
+    assert response.status_code == 422 and response.json()["detail"].startswith("b: ")
+
+
+def test_examples_endpoint_serves_every_example(served: Served) -> None:
+    from tests.web.conftest import REPO_ROOT
+
+    files = sorted(p.name for p in (REPO_ROOT / "schemas" / "examples").glob("*.json"))
+    listed = served.get("/v1/examples").json()
+    assert [e["name"] for e in listed] == files
+    scene = served.get(f"/v1/examples/{files[0]}").json()
+    assert scene == json.loads((REPO_ROOT / "schemas" / "examples" / files[0]).read_text())
+    assert served.get("/v1/examples/none.json").status_code == 404
+
+
+def test_decoded_image_cache_is_bounded_and_reuses_entries(
+    served: Served, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
+) -> None:
+    cache = DecodedImageCache(FilesystemStore(served.data_dir / "artifacts"), max_images=1)
+    first = cache.get(cylinder_job.job_id)
+    assert cache.get(cylinder_job.job_id) is first  # a hit returns the same decoded object
+    cache.get(cylinder_job_reseeded.job_id)
+    assert len(cache) == 1
+    assert cache.get(cylinder_job.job_id) is not first  # evicted, decoded again
+
+
+def test_index_and_static_files_are_served(served: Served) -> None:
+    import httpx
+
+    index = httpx.get(served.base_url + "/", timeout=10)
+    assert index.status_code == 200 and '<script type="module" src="/web/js/main.js">' in index.text
+    module = httpx.get(served.base_url + "/web/js/compare.js", timeout=10)
+    assert module.status_code == 200 and "export async function mountCompare" in module.text
