@@ -22,13 +22,17 @@ def constant_spectrum(power_w: float) -> dict[str, Any]:
     return {"spectrum": {"type": "constant", "value": 1.0}, "power_w": power_w}
 
 
-def mirror_room(*, size_px: int, spp: int, max_depth: int, bands: int) -> dict[str, Any]:
+def mirror_room(
+    *, size_px: int, spp: int, max_depth: int, bands: int, glass_sphere: bool = False
+) -> dict[str, Any]:
     """A diffuse floor, a perfect mirror wall behind it and a sphere light: only diffuse + Dirac materials.
+
+    ``glass_sphere`` adds a smooth, non-dispersive glass ball (n = 1.5) on the floor: refraction chains.
 
     Built so that no surface is ever seen from behind (Mitsuba's BSDFs are one-sided, ``hg_path``'s are
     two-sided): the floor (y = 0, facing up) ends at the mirror (z = −0.5, facing +z), nothing behind either.
     """
-    return {
+    scene: dict[str, Any] = {
         "schema": "hgrender/scene/v1",
         "name": "mirror room",
         "camera": {
@@ -73,6 +77,12 @@ def mirror_room(*, size_px: int, spp: int, max_depth: int, bands: int) -> dict[s
             }
         ],
     }
+    if glass_sphere:
+        scene["materials"]["glass"] = {"type": "dielectric", "ior": 1.5}
+        scene["shapes"].append(
+            {"type": "sphere", "material": "glass", "center_m": [-0.15, 0.15, 0.1], "radius_m": 0.15}
+        )
+    return scene
 
 
 # --- Fig. 7: a thin-film coated sphere under a sphere vs a cylinder light ------------------------------

@@ -64,3 +64,10 @@ def test_mirror_room_matches_path(tmp_path: Path) -> None:
     # specular chains whose Θ/r bookkeeping hg_path adds; the radiance must not change.
     scene = mirror_room(size_px=32, spp=512, max_depth=5, bands=8)
     assert_agreement(scene, tmp_path, path_spp=128)
+
+
+def test_mirror_room_with_glass_sphere_matches_path(tmp_path: Path) -> None:
+    # Refraction through a smooth glass ball (n = 1.5: Fresnel choice, 1/η² radiance scaling, total
+    # internal reflection) alongside the mirror, at Mitsuba's default depth 8.
+    scene = mirror_room(size_px=32, spp=512, max_depth=8, bands=8, glass_sphere=True)
+    assert_agreement(scene, tmp_path, path_spp=128)
