@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from hgrender.imaging import display_rgb8
+from hgrender.imaging import auto_exposure_ev, display_rgb8
 from tests.web.conftest import SIZE_PX, RenderedJob, Served, screenshot
 
 pytestmark = pytest.mark.browser
@@ -77,27 +77,31 @@ def test_canvas_matches_server_display_and_exposure(
     page: Any, served: Served, cylinder_job: RenderedJob
 ) -> None:
     open_viewer(page, served, cylinder_job.job_id)
+    # The viewer opens at the automatic exposure (99th luminance percentile → white, 0.5 EV steps).
+    ev = float(page.input_value("#ev-slider"))
+    assert ev == np.clip(round(auto_exposure_ev(cylinder_job.exr.rgb) * 2) / 2, -10, 10)
     shown = canvas_rgb(page)
-    png = served.get(f"/v1/jobs/{cylinder_job.job_id}/display.png", ev=0, tonemap="clamp").content
+    png = served.get(f"/v1/jobs/{cylinder_job.job_id}/display.png", ev=ev, tonemap="clamp").content
     server = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int64)
     assert shown.shape == (SIZE_PX, SIZE_PX, 3)
     assert np.abs(shown - server).max() <= 1
     screenshot(page, "viewer_srgb")
 
-    # +2 EV: every linear value ×4; the canvas follows display_rgb8(rgb, 2) and differs from EV 0.
+    # +2 EV: every linear value ×4; the canvas follows display_rgb8(rgb, ev + 2) and brightens.
+    brighter_ev = ev + 2.0 if ev <= 8.0 else ev - 2.0
     count = drawn_count(page)
-    page.fill("#ev-slider", "2")
+    page.fill("#ev-slider", str(brighter_ev))
     redrawn(page, count)
     brighter = canvas_rgb(page)
-    expected = display_rgb8(cylinder_job.exr.rgb, 2.0, "clamp").astype(np.int64)
+    expected = display_rgb8(cylinder_job.exr.rgb, brighter_ev, "clamp").astype(np.int64)
     assert np.abs(brighter - expected).max() <= 1
-    assert (brighter.sum(axis=-1) >= shown.sum(axis=-1)).all() and (brighter > shown + 1).any()
+    assert np.abs(brighter - shown).max() > 10
     count = drawn_count(page)
     page.select_option("#tonemap", "aces")
     redrawn(page, count)
-    expected = display_rgb8(cylinder_job.exr.rgb, 2.0, "aces").astype(np.int64)
+    expected = display_rgb8(cylinder_job.exr.rgb, brighter_ev, "aces").astype(np.int64)
     assert np.abs(canvas_rgb(page) - expected).max() <= 1
-    assert page.inner_text("#ev-label") == "2.0 EV"
+    assert page.inner_text("#ev-label") == f"{brighter_ev:.1f} EV"
 
 
 def test_wavelength_slider_switches_bands(page: Any, served: Served, cylinder_job: RenderedJob) -> None:
@@ -314,8 +318,9 @@ def test_controls_are_labelled_and_keyboard_reachable(
     assert page.inner_text("#zoom-label") != before
     # Arrow keys move the exposure slider by its step (0.5 EV).
     page.focus("#ev-slider")
-    page.keyboard.press("ArrowRight")
-    assert page.inner_text("#ev-label") == "0.5 EV"
+    ev = float(page.input_value("#ev-slider"))
+    page.keyboard.press("ArrowLeft")
+    assert page.inner_text("#ev-label") == f"{ev - 0.5:.1f} EV"
 
 
 def test_narrow_viewport_has_no_horizontal_overflow(
@@ -336,3 +341,20 @@ def test_narrow_viewport_has_no_horizontal_overflow(
             screenshot(page, name)
     finally:
         context.close()
+
+
+def test_cancel_and_delete_from_the_job_list(page: Any, served: Served) -> None:
+    from tests.web.conftest import cylinder_scene
+
+    # Large enough (64×64 px × 256 spp on one worker) to still be queued or running when canceled.
+    job_id = served.client.submit(cylinder_scene(width=64, height=64, spp=256), name="to cancel")["id"]
+    page.goto(f"{served.base_url}/#/jobs")
+    row = f'tr[data-job-id="{job_id}"]'
+    page.wait_for_selector(row)
+    page.click(f"{row} .job-cancel")
+    page.wait_for_function(f"() => document.querySelector('{row}').dataset.status === 'canceled'")
+    assert served.client.get(job_id)["status"] == "canceled"
+    page.once("dialog", lambda dialog: dialog.accept())
+    page.click(f"{row} .job-delete")
+    page.wait_for_selector(row, state="detached")
+    assert served.get(f"/v1/jobs/{job_id}").status_code == 404

@@ -194,3 +194,33 @@ def test_index_and_static_files_are_served(served: Served) -> None:
     assert index.status_code == 200 and '<script type="module" src="/web/js/main.js">' in index.text
     module = httpx.get(served.base_url + "/web/js/compare.js", timeout=10)
     assert module.status_code == 200 and "export async function mountCompare" in module.text
+
+
+def test_downsample_block_means_with_partial_edge_blocks() -> None:
+    from service.viewer_data import downsample
+
+    values = np.arange(5 * 7, dtype=np.float32).reshape(5, 7)
+    got = downsample(values, 3, average=True)
+    # Independent: mean of each 3×3 block clipped at the edges (rows 0-2, 3-4; columns 0-2, 3-5, 6).
+    expected = np.array(
+        [[values[r : r + 3, c : c + 3].mean() for c in range(0, 7, 3)] for r in range(0, 5, 3)]
+    )
+    np.testing.assert_allclose(got, expected, rtol=1e-6)
+    np.testing.assert_array_equal(downsample(values, 3, average=False), values[::3, ::3])
+
+
+def test_openapi_documents_the_viewer_endpoints(served: Served) -> None:
+    import httpx
+
+    paths = httpx.get(served.base_url + "/openapi.json", timeout=10).json()["paths"]
+    for path in (
+        "/v1/jobs/{job_id}/layers",
+        "/v1/jobs/{job_id}/layers/{name}",
+        "/v1/jobs/{job_id}/pixel",
+        "/v1/jobs/{job_id}/display.png",
+        "/v1/jobs/{job_id}/ellipses",
+        "/v1/compare",
+        "/v1/examples",
+    ):
+        assert "get" in paths[path], path
+    assert "/" not in paths  # the web pages are not API

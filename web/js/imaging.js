@@ -51,7 +51,7 @@ export function displayRgb8(rgb, rgba, exposureEv, operator) {
 
 /** Rec. 709 luminance of interleaved linear RGB, one value per pixel. */
 export function luminance(rgb) {
-  const out = new Float32Array(rgb.length / 3);
+  const out = new Float64Array(rgb.length / 3);
   for (let i = 0; i < out.length; i++) {
     out[i] = REC709_LUMINANCE[0] * rgb[3 * i] + REC709_LUMINANCE[1] * rgb[3 * i + 1] + REC709_LUMINANCE[2] * rgb[3 * i + 2];
   }

@@ -5,7 +5,7 @@
 // Pixel (x, y) counts from the top-left, y down. The diagnostics' `angle` is measured from +x towards
 // image +y UP, so on screen (SVG, y down) an ellipse's ℓ₁ axis is rotated by −angle.
 
-import { displayRgb8, luminance } from "./imaging.js";
+import { autoExposureEv, displayRgb8, luminance } from "./imaging.js";
 import { drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";
 import { PixelInspector } from "./inspector.js";
 
@@ -62,6 +62,10 @@ export class ImageViewer {
     });
     c.ev.addEventListener("input", () => {
       c.evLabel.textContent = `${Number(c.ev.value).toFixed(1)} EV`;
+      redraw();
+    });
+    this.root.querySelector("#ev-auto").addEventListener("click", () => {
+      this.setAutoExposure();
       redraw();
     });
     c.tonemap.addEventListener("change", redraw);
@@ -193,6 +197,7 @@ export class ImageViewer {
     this.root.querySelector("#viewer-title").textContent = `Job ${jobId}`;
     this.root.querySelector("#viewer-size").textContent = `${width}×${height} px, ${this.bandNames.length} bands`;
     await this.layer("rgb");
+    this.setAutoExposure();
     this.fit();
     await this.draw();
     this.inspector.reset(this.catalogue);
@@ -205,6 +210,14 @@ export class ImageViewer {
       this.layers.set(name, array.data);
     }
     return this.layers.get(name);
+  }
+
+  /** Exposure that maps the 99th percentile of luminance to white, on the slider's 0.5 EV steps. */
+  setAutoExposure() {
+    const slider = this.controls.ev;
+    const ev = Math.round(autoExposureEv(this.layers.get("rgb")) / Number(slider.step)) * Number(slider.step);
+    slider.value = String(Math.min(Math.max(ev, Number(slider.min)), Number(slider.max)));
+    this.controls.evLabel.textContent = `${Number(slider.value).toFixed(1)} EV`;
   }
 
   updateBandLabel() {
