@@ -225,3 +225,21 @@ def test_multipart_uploads_of_json_and_usd_render(two_workers: LiveService, tmp_
     bad.write_text("nope")
     response = client.http.post("/v1/jobs", files={"scene": (bad.name, bad.read_bytes())})
     assert response.status_code == 422 and response.json()["detail"].startswith("scene:")
+
+
+def test_a_chunk_failing_every_retry_fails_the_job_with_its_error(live_service: LiveService) -> None:
+    """Losing the scene makes every attempt of the chunk raise; after the retries (1 s apart here) the
+    merge step reports the chunk's error and the job reads ``failed``."""
+    service = live_service
+    service.stop_workers()
+    client = service.client()
+    job_id = client.submit(tiny_scene(), chunks=1)["id"]
+    service.redis.delete(f"hgrender:job:{job_id}:scene")
+    service.start_worker("f1")
+    final = client.wait(job_id, timeout_s=120)
+    assert final["status"] == "failed"
+    assert final["error"].startswith("chunk 0:") and job_id in final["error"]
+    assert final["chunks"][0]["attempts"] == 1 + service.settings.chunk_retry_max
+    names = {a["name"] for a in client.artifacts(job_id)}
+    assert {"worker.log", "manifest.json"} <= names and "image.exr" not in names
+    service.stop_workers()
