@@ -202,15 +202,6 @@ def test_fig8_mirror_light_is_more_coherent_and_shows_stronger_fringes(
     assert fit_mirror.visibility - fit_direct.visibility > 0.3
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "renderer bug: next-event estimation evaluates a thin film's interference phase (film_terms at "
-        "wo_em) towards the sampled point on the emitter instead of its centre, so an extended source "
-        "dephases the fringes on top of the HG visibility — decoherence counted twice (BRIEF: phase along "
-        "the direction to the centre). Direct light: V̂ ≈ 0.16 against ≈ 0.43 predicted."
-    ),
-)
 def test_fig8_direct_fringe_visibility_matches_the_centre_phase_prediction(
     fig8_renders: dict[str, dict[str, np.ndarray]],
 ) -> None:
@@ -277,16 +268,6 @@ def test_fig9_one_mode_vs_sixteen_modes_ciede2000(tmp_path: Path) -> None:
     assert p95 <= 5.0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "renderer bug: the Dirac (e^{−g}) part of a thin film is weighted by the incoherent R_inc only "
-        "(bsdfs._rough_sample's specular_weight uses terms[0]) and no film record is kept for delta samples "
-        "(integrator: is_film requires ~delta), so a smooth coating shows no interference at all even "
-        "under coherent light (V̂ ≈ 0.03 where ℓ ≈ 5 µm predicts ≈ 1); the Fig. 7 examples (σ = 0.05 µm, "
-        "e^{−g} ≈ 0.9) lose most of their fringes this way"
-    ),
-)
 def test_smooth_thin_film_mirror_reflection_shows_fringes(tmp_path: Path) -> None:
     """A smooth coated plane reflecting a small sphere light (ℓ ≈ 5 µm ≫ ξ = τ·sin 20° ≈ 0.42 µm): the
     specular reflection is the coherent film reflectance, V ≈ 0.997. Tolerance: 3 standard errors of the

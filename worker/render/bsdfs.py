@@ -119,8 +119,13 @@ class MaterialKernels:
         normal_world: Any,
         frame: Any,
         active: Any,
+        wo_phase: Any = None,
     ) -> tuple[Any, Any]:
-        """(f·cos θo per wavelength, hero-MIS pdf) for light arriving along ``wo``."""
+        """(f·cos θo per wavelength, hero-MIS pdf) for light arriving along ``wo``.
+
+        ``wo_phase`` (default ``wo``) is the direction whose interference phase a thin film uses: for light
+        from an emitter the direction to its centre (BRIEF: sampled emitter points serve radiometry only).
+        """
         mi = self.mi
         kind = self.kind(material)
         value = mi.Spectrum(0.0)
@@ -139,7 +144,7 @@ class MaterialKernels:
             pdf = dr.select(is_this, lobe_pdf, pdf)
         for index, surface in self._per_material(mat.MaterialKind.THIN_FILM):
             is_this = valid & (material == index)
-            terms = self.film_terms(material, wo.z, wavelengths)
+            terms = self.film_terms(material, (wo if wo_phase is None else wo_phase).z, wavelengths)
             thickness_m = self.param(material, mat.FILM_THICKNESS_M)
             film = combine_film_terms(
                 terms,

@@ -239,6 +239,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         first_frame_y = mi.Vector3f(0.0)
         film_pending = mi.Bool(False)
         film_separation = mi.Vector3f(0.0)
+        film_material = mi.UInt32(0)
+        film_position = mi.Point3f(0.0)
+        film_normal = mi.Vector3f(0.0, 0.0, 1.0)
+        chain_specular = mi.Bool(False)
         film_terms = [mi.Spectrum(0.0) for _ in range(film_beams if has_film else 0)]
         # diagnostics accumulators
         seen_nonspecular = mi.Bool(False)
@@ -292,6 +296,12 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
             src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
             src_yy = dr.select(hit_emitter, em_syy, sr_yy)
+            # An emitter's coherence propagates from its centre (as in NEE): replace the last segment's length
+            # by the distance from the segment's origin to that centre.
+            centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray.o)
+            chain_distance = dr.select(
+                hit_emitter, chain_distance - segment + centre_distance, chain_distance
+            )
             resolved = IncidentCoherence(
                 src_xx,
                 src_xy,
@@ -302,8 +312,19 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
             )
             if has_film:
+                # An emitter reached straight from the film: its interference phase is taken towards the
+                # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
+                centre_phase = hit_emitter & ~chain_specular
+                _, emitter_to_film = emitter_direction(
+                    mi, self.context.emitter_flat, em_record, film_position
+                )
+                cos_centre = -dr.dot(emitter_to_film, film_normal)
+                centre_terms = self.kernels.film_terms(film_material, cos_centre, wavelengths)
+                phase_terms = list(film_terms)
+                for slot in range(film_beams):
+                    phase_terms[slot] = dr.select(centre_phase, centre_terms[slot], film_terms[slot])
                 film_factor = combine_film_terms(
-                    film_terms,
+                    phase_terms,
                     lambda d, c=resolved, v=film_separation: self.visibility(c, v * d, wavelengths),
                 )
                 film_factor = film_factor / dr.maximum(film_terms[0], 1e-12)
@@ -377,13 +398,14 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 emitter_is_rect(mi, self.context.emitter_flat, em_record_nee),
             )
             wo_em = frame.to_local(ds_em.d)
-            # Coherence-sensitive lobes (gratings) are evaluated towards the emitter's centre (BRIEF).
+            # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
+            # and a thin film's interference phase; the sampled point serves the radiometric terms only.
+            wo_centre = frame.to_local(-nee_dir)
             wo_eval = wo_em
             if has_grating:
-                wo_centre = frame.to_local(-nee_dir)
                 wo_eval = dr.select(kind == int(mat.MaterialKind.GRATING), wo_centre, wo_em)
             bsdf_value, bsdf_pdf = self.kernels.eval_pdf(
-                material, wi, wo_eval, wavelengths, nee_coherence, frame.n, frame, do_nee
+                material, wi, wo_eval, wavelengths, nee_coherence, frame.n, frame, do_nee, wo_phase=wo_centre
             )
             mis_em = dr.select(ds_em.delta, 1.0, ds_em.pdf / dr.maximum(ds_em.pdf + bsdf_pdf, 1e-20))
             if has_grating:
@@ -430,14 +452,19 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             pending |= new_record
             chain_distance = dr.select(new_record, 0.0, chain_distance)
             if has_film:
-                is_film = new_record & (kind == int(mat.MaterialKind.THIN_FILM)) & ~delta
+                # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
+                is_film = new_record & (kind == int(mat.MaterialKind.THIN_FILM))
                 film_pending = dr.select(new_record, is_film, film_pending)
                 thickness = self.kernels.param(material, mat.FILM_THICKNESS_M)
                 film_separation = dr.select(is_film, frame.n * thickness, film_separation)
+                film_material = dr.select(is_film, material, film_material)
+                film_position = dr.select(is_film, si.p, film_position)
+                film_normal = dr.select(is_film, frame.n, film_normal)
                 for index in range(film_beams):
                     film_terms[index] = dr.select(is_film, sampled_film_terms[index], film_terms[index])
             # Through a perfect mirror / refraction the carried vectors follow the beam.
             through_specular = continue_path & specular & pending
+            chain_specular = dr.select(new_record, False, chain_specular | through_specular)
             frame_x = dr.select(through_specular, _reflect_vector(frame_x, frame.n), frame_x)
             frame_y = dr.select(through_specular, _reflect_vector(frame_y, frame.n), frame_y)
             film_separation = dr.select(

@@ -118,6 +118,10 @@ class Renderer:
         for registry_id, record in emitter_ids.items():
             emitter_index[registry_id] = record
         right, up = self._screen_axes()
+        camera_right, camera_up = mi.Vector3f(*right), mi.Vector3f(*up)
+        # Opaque: as literals their order in the IR changed between the first and later traces, so the first
+        # render compiled a kernel that no later render reused.
+        dr.make_opaque(camera_right, camera_up)
         kinds = {record.kind for record in compiled.emitter_table.records}
         return RenderContext(
             bands=compiled.bands,
@@ -132,8 +136,8 @@ class Renderer:
             disk_coefficients=source_coefficients("disk", compiled.scene.film.modes),
             rect_coefficients=source_coefficients("rect", compiled.scene.film.modes),
             rect_sources=bool(kinds & {EmitterKind.RECTANGLE, EmitterKind.CYLINDER}),
-            camera_right=mi.Vector3f(*right),
-            camera_up=mi.Vector3f(*up),
+            camera_right=camera_right,
+            camera_up=camera_up,
         )
 
     def _screen_axes(self) -> tuple[list[float], list[float]]:
