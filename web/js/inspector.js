@@ -89,6 +89,8 @@ export class PixelInspector {
     const [width, height, left, bottom, top] = [320, 160, 48, 22, 8];
     svg.replaceChildren();
     const present = ["A", "B"].filter((s) => this.pixels[s]);
+    svg.hidden = !present.length;
+    this.root.querySelector("#inspector-hint").hidden = Boolean(present.length);
     if (!present.length) return;
     const all = present.flatMap((s) => this.pixels[s].spectrum.filter((v) => v != null));
     const wavelengths = this.pixels[present[0]].wavelengths_nm;
@@ -108,7 +110,7 @@ export class PixelInspector {
     add("line", { x1: left, y1: top, x2: left, y2: height - bottom, class: "axis" });
     add("text", { x: left, y: height - 6, class: "tick" }, `${w0.toFixed(0)} nm`);
     add("text", { x: width - 8, y: height - 6, class: "tick", "text-anchor": "end" }, `${w1.toFixed(0)} nm`);
-    add("text", { x: 2, y: top + 8, class: "tick" }, formatValue(vMax));
+    add("text", { x: 2, y: top + 8, class: "tick" }, `${formatValue(vMax)} ${this.unit}`);
     add("text", { x: 2, y: height - bottom, class: "tick" }, "0");
     for (const slot of present) {
       const pixel = this.pixels[slot];

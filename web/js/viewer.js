@@ -20,6 +20,7 @@ export const DIAGNOSTIC_LAYERS = [
 const REFERENCE_WAVELENGTH_NM = 550; // diagnostics are reported at 550 nm and scale ∝ λ
 const UNCOVERED_RGB = [40, 40, 40];
 const HISTOGRAM_BINS = 64;
+const LARGE_IMAGE_PIXELS = 1 << 20;
 const HISTOGRAM_EV_RANGE = [-12, 4];
 
 export class ImageViewer {
@@ -195,6 +196,7 @@ export class ImageViewer {
     mode.replaceChildren(new Option("sRGB (from the spectrum)", "srgb"), new Option("single band (false colour)", "band"));
     for (const [name, label] of DIAGNOSTIC_LAYERS) if (this.info.has(name)) mode.append(new Option(label, name));
     this.root.querySelector("#viewer-title").textContent = `Job ${jobId}`;
+    this.root.querySelector("#viewer-hint").hidden = true;
     this.root.querySelector("#viewer-size").textContent = `${width}×${height} px, ${this.bandNames.length} bands`;
     await this.layer("rgb");
     this.setAutoExposure();
@@ -206,7 +208,10 @@ export class ImageViewer {
 
   async layer(name) {
     if (!this.layers.has(name)) {
-      const array = await this.api.floats(`/v1/jobs/${this.jobId}/layers/${encodeURIComponent(name)}?format=f32`);
+      // Half precision halves the transfer of large images (relative rounding 2⁻¹¹, below one 8-bit level).
+      const format = this.catalogue.width * this.catalogue.height > LARGE_IMAGE_PIXELS ? "f16" : "f32";
+      const path = `/v1/jobs/${this.jobId}/layers/${encodeURIComponent(name)}?format=${format}`;
+      const array = await this.api.floats(path);
       this.layers.set(name, array.data);
     }
     return this.layers.get(name);
@@ -316,6 +321,8 @@ export class ImageViewer {
   /** Ellipses: semi-axes ∝ ℓ₁, ℓ₂ (linear or log scale), rotated by −angle on screen, coloured by area. */
   drawEllipses() {
     this.overlay.replaceChildren();
+    const legend = this.root.querySelector("#ellipse-legend");
+    legend.replaceChildren();
     const grid = this.ellipses || [];
     if (!grid.length) return;
     const spacing = Number(this.controls.spacing.value);
@@ -328,6 +335,8 @@ export class ImageViewer {
     const areas = grid.map((e) => e.area_um2);
     const areaScale = makeScale(Math.min(...areas), Math.max(...areas), true);
     const lambdaFactor = this.wavelengthNm() / REFERENCE_WAVELENGTH_NM;
+    const legendScale = makeScale(areaScale.lo * lambdaFactor ** 2, areaScale.hi * lambdaFactor ** 2, true);
+    drawColourBar(legend, legendScale, "µm²", `ellipse colour: coherence area at ${this.wavelengthNm().toFixed(0)} nm`);
     const ns = "http://www.w3.org/2000/svg";
     for (const e of grid) {
       const cx = e.x + 0.5;
