@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import drjit as dr
 import numpy as np
@@ -162,23 +163,31 @@ class Renderer:
         """Per-pixel sums of ``spp`` samples per pixel with ``seed``; ``RenderCanceledError`` on stop."""
         pixels = self.width * self.height
         spp_per_pass = max(1, min(spp, MAX_WAVEFRONT // max(pixels, 1)))
-        total: PixelSums | None = None
+        total = None
         done = 0
         pass_index = 0
         while done < spp:
             if should_stop is not None and should_stop():
                 raise RenderCanceledError("render stopped on request")
             count = min(spp_per_pass, spp - done)
-            result = self._render_pass(count, pass_seed(seed, pass_index))
-            total = result if total is None else total.add(result)
+            table = self._render_pass(count, pass_seed(seed, pass_index))
+            total = table if total is None else total + table
+            dr.eval(total)
             done += count
             pass_index += 1
             if progress is not None:
                 progress(done / spp)
-        assert total is not None
-        return total
+        band_count = self.compiled.bands.band_count
+        columns = np.asarray(total).reshape(self.height, self.width, -1)
+        return PixelSums(
+            sample_count=spp,
+            bands=columns[..., :band_count],
+            bands_sq=columns[..., band_count : 2 * band_count],
+            values={key: columns[..., 2 * band_count + i] for i, key in enumerate(SUM_KEYS)},
+        )
 
-    def _render_pass(self, spp: int, seed: int) -> PixelSums:
+    def _render_pass(self, spp: int, seed: int) -> Any:
+        """One pass: the per-pixel sums table of ``_interleave`` (bands, bands², SUM_KEYS)."""
         mi = self.mi
         bands = self.compiled.bands
         width, height = self.width, self.height
@@ -243,21 +252,22 @@ class Renderer:
         # Evaluate every per-sample output in one launch of the path megakernel: reducing them one by one
         # would re-run the whole path loop for each output.
         dr.eval(band_values, per_sample)
-        reduced_bands = [dr.block_sum(v, spp) for v in band_values]
-        reduced_bands_sq = [dr.block_sum(dr.square(v), spp) for v in band_values]
-        reduced = {key: dr.block_sum(value, spp) for key, value in per_sample.items()}
-        dr.eval(reduced_bands, reduced_bands_sq, reduced)
-        shape = (height, width)
-        return PixelSums(
-            sample_count=spp,
-            bands=np.stack([np.asarray(v, dtype=np.float64).reshape(shape) for v in reduced_bands], axis=-1),
-            bands_sq=np.stack(
-                [np.asarray(v, dtype=np.float64).reshape(shape) for v in reduced_bands_sq], axis=-1
-            ),
-            values={
-                key: np.asarray(value, dtype=np.float64).reshape(shape) for key, value in reduced.items()
-            },
-        )
+        reduced = [dr.block_sum(v, spp) for v in band_values]
+        reduced += [dr.block_sum(dr.square(v), spp) for v in band_values]
+        reduced += [dr.block_sum(per_sample[key], spp) for key in SUM_KEYS]
+        return _interleave(mi, reduced)
+
+
+def _interleave(mi: Any, columns: list[Any]) -> Any:
+    """One Float64 array (pixel-major, column-minor) from per-pixel Float columns (unique-index scatters)."""
+    count = len(columns)
+    pixels = dr.width(columns[0])
+    table = dr.zeros(mi.Float64, pixels * count)
+    base = dr.arange(mi.UInt32, pixels) * count
+    for column, values in enumerate(columns):
+        dr.scatter(table, mi.Float64(values), base + column)
+    dr.eval(table)
+    return table
 
 
 class RenderCanceledError(Exception):
