@@ -114,11 +114,6 @@ class DecodedImage:
         return np.stack([self.channels["R"], self.channels["G"], self.channels["B"]], axis=-1)
 
     @property
-    def spectrum(self) -> np.ndarray:
-        """Band radiances, shape (H, W, B) in band order (increasing wavelength)."""
-        return np.stack([self.channels[name] for name in self.band_names], axis=-1)
-
-    @property
     def covered(self) -> np.ndarray:
         """Pixels that carry coherence diagnostics (``coherence.weight`` > 0)."""
         weight = self.channels.get("coherence.weight")
