@@ -33,9 +33,10 @@ CANCEL_POLL_INTERVAL_S = 0.5
 
 
 def preload_renderer() -> None:
-    """Import the renderer in the worker's main process, so that every forked work horse starts with it
-    loaded (saves the ~0.7 s import per chunk). Only imports: no Dr.Jit backend is initialised here,
-    because its LLVM thread pool or CUDA context would not survive the fork."""
+    """Import the renderer and its image writers in the worker's main process, so that every forked
+    work horse starts with them loaded (saves ~0.7 s per chunk and ~0.3 s per merge). Only imports:
+    no Dr.Jit backend is initialised here, because its LLVM thread pool or CUDA context would not
+    survive the fork."""
     from worker.mitsuba_setup import find_libllvm
 
     # As load_mitsuba() does: Dr.Jit must see libLLVM 19 before it is first imported.
@@ -43,6 +44,8 @@ def preload_renderer() -> None:
     if "DRJIT_LIBLLVM_PATH" not in os.environ and libllvm is not None:
         os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
     import mitsuba  # noqa: F401
+    import OpenImageIO  # noqa: F401  (EXR writing, imported lazily by the merge step)
+    import PIL.Image  # noqa: F401  (preview PNG, idem)
 
     import worker.render.api  # noqa: F401
 
