@@ -358,3 +358,28 @@ def test_cancel_and_delete_from_the_job_list(page: Any, served: Served) -> None:
     page.click(f"{row} .job-delete")
     page.wait_for_selector(row, state="detached")
     assert served.get(f"/v1/jobs/{job_id}").status_code == 404
+
+
+def test_upload_a_json_scene_with_overrides(page: Any, served: Served, tmp_path: Any) -> None:
+    import json
+
+    from tests.web.conftest import cylinder_scene
+
+    scene_file = tmp_path / "uploaded.json"
+    scene_file.write_text(json.dumps(cylinder_scene()))
+    page.goto(f"{served.base_url}/#/jobs")
+    page.wait_for_function("() => document.querySelector('#scene-example').options.length > 1")
+    page.set_input_files("#scene-file", str(scene_file))
+    page.fill("#override-width", "16")
+    page.fill("#override-height", "12")
+    page.fill("#override-spp", "2")
+    page.fill("#job-name", "uploaded")
+    page.click("#submit-job")
+    page.wait_for_function(
+        "() => document.querySelector('#submit-status').textContent.startsWith('submitted')"
+    )
+    job_id = page.inner_text("#submit-status").split()[-1]
+    final = served.client.wait(job_id, timeout_s=120)
+    assert final["status"] == "succeeded" and final["spp"] == 2 and final["name"] == "uploaded"
+    layers = served.get(f"/v1/jobs/{job_id}/layers").json()
+    assert (layers["width"], layers["height"]) == (16, 12)  # the overrides were edited into film
