@@ -2,12 +2,13 @@
 
 ``image.exr`` holds the bands ``S0.<λ>nm`` (Fichet et al. 2021; radiance in W·m⁻²·sr⁻¹·nm⁻¹, λ with a comma
 decimal separator) and ``coherence.<name>``; ``variance.exr`` holds, under the same band names, the variance
-of each pixel's Monte Carlo mean (σ²/N, same units squared). Read with OpenImageIO; NumPy only (the service
-imports this module, so no Mitsuba).
+of each pixel's Monte Carlo mean (σ̂²/N, same units squared); ``summary.json`` gives N (``spp``). Read
+with OpenImageIO; NumPy only (the service imports this module, so no Mitsuba).
 """
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,12 +24,17 @@ COHERENCE_METRIC_CHANNELS: tuple[str, ...] = ("l1_um", "l2_um", "anisotropy")
 @dataclass(frozen=True)
 class RenderOutputs:
     """One render: band radiance and variance of shape (H, W, B), band centres (B,) in nm, and the
-    coherence diagnostics (H, W) keyed by name (``l1_um``, ``l2_um``, ``anisotropy``, ``weight``)."""
+    coherence diagnostics (H, W) keyed by name (``l1_um``, ``l2_um``, ``anisotropy``, ``weight``).
+
+    ``band_variance`` is unbiased: ``variance.exr`` stores σ̂²/N with the 1/N sample variance σ̂², whose
+    expectation is σ²(N−1)/N, so it is scaled by N/(N−1) with N = the samples per pixel of
+    ``summary.json`` (at 4-8 spp the uncorrected value would understate the noise by 12-25 %)."""
 
     band_centers_nm: np.ndarray
     bands: np.ndarray
     band_variance: np.ndarray
     coherence: dict[str, np.ndarray]
+    spp: int
 
 
 def read_exr_channels(path: Path) -> dict[str, np.ndarray]:
@@ -58,8 +64,11 @@ def band_channels(channels: dict[str, np.ndarray]) -> list[tuple[float, str]]:
 
 
 def load_render_outputs(directory: Path) -> RenderOutputs:
-    """``image.exr`` and ``variance.exr`` of one job from ``directory``."""
+    """``image.exr``, ``variance.exr`` and ``summary.json`` (for the spp) of one job from ``directory``."""
     directory = Path(directory)
+    spp = int(json.loads((directory / "summary.json").read_text())["spp"])
+    if spp < 2:
+        raise ValueError(f"directory: {directory} was rendered with {spp} spp; noise estimates need >= 2")
     image = read_exr_channels(directory / "image.exr")
     variance = read_exr_channels(directory / "variance.exr")
     bands = band_channels(image)
@@ -76,6 +85,7 @@ def load_render_outputs(directory: Path) -> RenderOutputs:
     return RenderOutputs(
         band_centers_nm=np.array([center for center, _ in bands]),
         bands=np.stack([image[name] for _, name in bands], axis=-1),
-        band_variance=np.stack([variance[name] for _, name in bands], axis=-1),
+        band_variance=np.stack([variance[name] for _, name in bands], axis=-1) * (spp / (spp - 1)),
         coherence=coherence,
+        spp=spp,
     )

@@ -7,14 +7,24 @@ Gaussian statistics):
 
 * Bands. Image-mean test: d_b = mean_p(c − a), Var[d_b] = Σ_p (v_a + v_c) / N² (pixels independent), so
   z_b = d_b / √Var[d_b]. Per-pixel excess test: E[(c − a)²] = δ² + v_a + v_c, so the excess
-  e_p = (c − a)² − v_a − v_c estimates the squared true difference δ²; under no change its sum has
-  variance ≈ Σ_p 2 (v_a + v_c)² (Gaussian pixel means), giving z_excess = Σ e_p / √(Σ 2 (v_a + v_c)²).
-  Effect size: the noise-corrected relative RMSE √max(0, mean_p e_p) / rms_p(a); the raw relative RMSE
-  √mean_p (c − a)² / rms_p(a) is reported too. A band fails if its corrected RMSE > ``max_rel_rmse`` and
-  max(|z_b|, z_excess) > z_crit.
+  e_p = (c − a)² − v_a − v_c estimates the squared true difference δ²; under no change E[e_p] = 0 and
+  z_excess = Σ e_p / √(Σ e_p²) is a self-normalised sum (asymptotically N(0, 1) for independent pixels
+  whatever their distribution: pixel means of a few samples are far from Gaussian, so a Gaussian
+  variance of (c − a)² would understate the tails). Per-pixel test: t_p = (c − a)/√(v_a + v_c) is
+  antisymmetric under exchanging the two renders, so under no change it is symmetric about 0 whatever
+  the pixel's distribution, and z_pixel = Σ t_p / √(Σ t_p²) (self-normalised) weights each pixel by its
+  own noise: a few noisy pixels (an emitter's edges) cannot hide a change of every quiet pixel, which
+  they do in z_b's unweighted image mean.
+  Effect sizes: the relative change of the band's image mean, d_b / mean_p(a), and the noise-corrected
+  relative RMSE √max(0, mean_p e_p) / rms_p(a) (the raw √mean_p (c − a)² / rms_p(a) is reported too). A
+  band fails if |relative mean change| > ``max_rel_mean_change`` or its corrected RMSE > ``max_rel_rmse``,
+  and its significance max(|z_b|, |z_pixel|, z_excess) > z_crit.
 * Colour. Band spectra → CIE 1931 XYZ → CIELAB with the D65 white scaled to the baseline's 99th-percentile
-  luminance (one white for both images); per-pixel ΔE₀₀ mean, p95, max. p95 fails if > ``max_delta_e00_p95``
-  and some band differs significantly (colour cannot change unless the spectrum does).
+  luminance (one white for both images); per-pixel ΔE₀₀ mean, p95, max. Noise alone gives a large ΔE₀₀ at
+  few spp, so its level is estimated by a parametric bootstrap: ΔE₀₀ between a and a + ε √(v_a + v_c)
+  (ε ~ N(0, 1) per pixel and band, clipped at 0, four draws, fixed seed) gives ``p95_noise``; the excess
+  p95 − p95_noise fails if > ``max_delta_e00_p95`` and some band differs significantly (colour cannot
+  change unless the spectrum does).
 * Coherence. Over pixels with weight > 0 in both, the median relative change (c − a)/a of ℓ₁, ℓ₂ and
   anisotropy; significance by the sign test: under no change P(c > a) = ½ exactly (the two renders are
   exchangeable), so z = (n₊ − n₋)/√(n₊ + n₋). Fails if |median| > ``max_coherence_drift`` and |z| > z_crit.
@@ -31,6 +41,8 @@ from hgrender.colour import D65_WHITE_XYZ, bands_to_xyz, ciede2000, xyz_to_lab
 from service.regression.images import COHERENCE_METRIC_CHANNELS, RenderOutputs
 from service.regression.models import Thresholds
 
+NOISE_DRAWS = 4
+"""Bootstrap draws of the ΔE₀₀ noise level (4 × the pixel count samples its 95th percentile)."""
 WHITE_PERCENTILE = 99.0
 """Luminance percentile of the baseline that is the CIELAB reference white (robust against fireflies)."""
 
@@ -54,8 +66,14 @@ def _z_score(difference: float, variance: float) -> float:
     return 0.0 if difference == 0.0 else float(np.copysign(np.inf, difference))
 
 
+def band_significance(band: dict[str, float]) -> float:
+    """The band's largest test statistic: max(|z_mean|, |z_pixel|, z_excess)."""
+    return max(abs(band["z_mean"]), abs(band["z_pixel"]), band["z_excess"])
+
+
 def band_metrics(baseline: RenderOutputs, current: RenderOutputs) -> list[dict[str, float]]:
-    """Per band: means, z of the mean difference, excess z, raw and noise-corrected relative RMSE."""
+    """Per band: means, the z of the mean difference, per-pixel and excess z, raw and noise-corrected
+    relative RMSE."""
     a, c = baseline.bands, current.bands
     variance = baseline.band_variance + current.band_variance
     pixel_count = a.shape[0] * a.shape[1]
@@ -66,13 +84,18 @@ def band_metrics(baseline: RenderOutputs, current: RenderOutputs) -> list[dict[s
         var = variance[..., band]
         rms = float(np.sqrt(np.mean(a[..., band] ** 2))) or rms_all or 1.0
         excess = diff**2 - var
+        noisy = var > 0.0
+        t = diff[noisy] / np.sqrt(var[noisy])
+        mean_baseline = float(np.mean(a[..., band]))
         results.append(
             {
                 "wavelength_nm": float(center_nm),
-                "mean_baseline": float(np.mean(a[..., band])),
+                "mean_baseline": mean_baseline,
                 "mean_current": float(np.mean(c[..., band])),
+                "rel_mean_change": float(_z_score(float(np.mean(diff)), mean_baseline**2)),
                 "z_mean": float(_z_score(float(np.mean(diff)), float(np.sum(var)) / pixel_count**2)),
-                "z_excess": float(_z_score(float(np.sum(excess)), float(np.sum(2.0 * var**2)))),
+                "z_pixel": float(_z_score(float(np.sum(t)), float(np.sum(t**2)))),
+                "z_excess": float(_z_score(float(np.sum(excess)), float(np.sum(excess**2)))),
                 "rel_rmse": float(np.sqrt(np.mean(diff**2)) / rms),
                 "rel_rmse_corrected": float(np.sqrt(max(0.0, float(np.mean(excess)))) / rms),
             }
@@ -82,15 +105,35 @@ def band_metrics(baseline: RenderOutputs, current: RenderOutputs) -> list[dict[s
 
 def delta_e00_metrics(baseline: RenderOutputs, current: RenderOutputs) -> dict[str, float]:
     """Per-pixel ΔE₀₀ statistics of the two spectral images (one reference white, from the baseline)."""
-    xyz_a = bands_to_xyz(baseline.bands, baseline.band_centers_nm)
-    xyz_c = bands_to_xyz(current.bands, current.band_centers_nm)
+    centers_nm = baseline.band_centers_nm
+    xyz_a = bands_to_xyz(baseline.bands, centers_nm)
     white_y = float(np.percentile(xyz_a[..., 1], WHITE_PERCENTILE))
     white_xyz = D65_WHITE_XYZ * (white_y if white_y > 0.0 else 1.0)
-    delta_e = ciede2000(xyz_to_lab(xyz_a, white_xyz), xyz_to_lab(xyz_c, white_xyz))
+    lab_a = xyz_to_lab(xyz_a, white_xyz)
+    delta_e = ciede2000(lab_a, xyz_to_lab(bands_to_xyz(current.bands, centers_nm), white_xyz))
+    # Parametric bootstrap of the noise level: the baseline plus noise of both renders' variance.
+    rng = np.random.default_rng(0)
+    sigma = np.sqrt(baseline.band_variance + current.band_variance)
+    noise_delta_e = [
+        ciede2000(
+            lab_a,
+            xyz_to_lab(
+                bands_to_xyz(
+                    np.maximum(baseline.bands + sigma * rng.standard_normal(sigma.shape), 0.0), centers_nm
+                ),
+                white_xyz,
+            ),
+        )
+        for _ in range(NOISE_DRAWS)
+    ]
+    p95 = float(np.percentile(delta_e, 95.0))
+    p95_noise = float(np.percentile(np.concatenate([d.ravel() for d in noise_delta_e]), 95.0))
     return {
         "mean": float(np.mean(delta_e)),
-        "p95": float(np.percentile(delta_e, 95.0)),
+        "p95": p95,
         "max": float(np.max(delta_e)),
+        "p95_noise": p95_noise,
+        "p95_excess": max(0.0, p95 - p95_noise),
     }
 
 
@@ -137,18 +180,24 @@ def compare_renders(
     colour = delta_e00_metrics(baseline, current)
     coherence = coherence_metrics(baseline, current)
     reasons = []
-    significant_bands = [b for b in bands if max(abs(b["z_mean"]), b["z_excess"]) > z_crit]
+    significant_bands = [b for b in bands if band_significance(b) > z_crit]
     for band in significant_bands:
+        if abs(band["rel_mean_change"]) > thresholds.max_rel_mean_change:
+            reasons.append(
+                f"{scene}: rel_mean_change of band {band['wavelength_nm']:.1f} nm is "
+                f"{band['rel_mean_change']:+.4f} (|.| > {thresholds.max_rel_mean_change}, "
+                f"z {band_significance(band):.1f})"
+            )
         if band["rel_rmse_corrected"] > thresholds.max_rel_rmse:
             reasons.append(
                 f"{scene}: rel_rmse of band {band['wavelength_nm']:.1f} nm is "
-                f"{band['rel_rmse_corrected']:.4f} > {thresholds.max_rel_rmse} (z_mean "
-                f"{band['z_mean']:.1f}, z_excess {band['z_excess']:.1f})"
+                f"{band['rel_rmse_corrected']:.4f} > {thresholds.max_rel_rmse} "
+                f"(z {band_significance(band):.1f})"
             )
-    if significant_bands and colour["p95"] > thresholds.max_delta_e00_p95:
+    if significant_bands and colour["p95_excess"] > thresholds.max_delta_e00_p95:
         reasons.append(
-            f"{scene}: delta_e00_p95 is {colour['p95']:.3f} > {thresholds.max_delta_e00_p95} "
-            f"({len(significant_bands)} bands differ significantly)"
+            f"{scene}: delta_e00_p95 is {colour['p95']:.3f}, {colour['p95_excess']:.3f} above its noise "
+            f"level > {thresholds.max_delta_e00_p95} ({len(significant_bands)} bands differ significantly)"
         )
     for name, drift in coherence.items():
         if abs(drift["median_rel_change"]) > thresholds.max_coherence_drift and abs(drift["z_sign"]) > z_crit:
@@ -159,7 +208,7 @@ def compare_renders(
     metrics = {
         "bands": bands,
         "rel_rmse_max": max(b["rel_rmse_corrected"] for b in bands),
-        "z_max": max(max(abs(b["z_mean"]), b["z_excess"]) for b in bands),
+        "z_max": max(band_significance(b) for b in bands),
         "delta_e00": colour,
         "coherence": coherence,
     }

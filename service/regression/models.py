@@ -26,10 +26,15 @@ class Thresholds(BaseModel):
     z_critical: float = Field(
         5.0, gt=0, description="Significance: |z| above this is not explained by Monte Carlo noise."
     )
+    max_rel_mean_change: float = Field(
+        0.05, ge=0, description="Largest |relative change| of any spectral band's image mean."
+    )
     max_rel_rmse: float = Field(
         0.05, ge=0, description="Largest noise-corrected relative RMSE of any spectral band."
     )
-    max_delta_e00_p95: float = Field(2.0, ge=0, description="Largest 95th percentile of per-pixel ΔE₀₀.")
+    max_delta_e00_p95: float = Field(
+        2.0, ge=0, description="Largest 95th percentile of per-pixel ΔE₀₀ above its noise level."
+    )
     max_coherence_drift: float = Field(
         0.05, ge=0, description="Largest |median relative change| of ℓ₁, ℓ₂ or anisotropy."
     )

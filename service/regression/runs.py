@@ -31,7 +31,7 @@ from service.models import JobStatus
 from service.regression.images import load_render_outputs
 from service.regression.metrics import compare_renders
 from service.regression.models import RunView, SceneResult, Suite, SuiteScene
-from service.regression.store import RegressionStore
+from service.regression.store import BASELINE_FILES, RegressionStore
 from service.regression.webhooks import deliver_webhook
 from service.store import store_from_settings
 
@@ -149,7 +149,7 @@ class RunService:
                 }
             )
         baseline_dir, current_dir = work_dir / result.scene / "baseline", work_dir / result.scene / "current"
-        for name in ("image.exr", "variance.exr"):
+        for name in BASELINE_FILES:
             for directory in (baseline_dir, current_dir):
                 directory.mkdir(parents=True, exist_ok=True)
             (baseline_dir / name).write_bytes(
