@@ -13,7 +13,6 @@ import time
 from collections.abc import AsyncIterator
 
 import redis.asyncio as aioredis
-from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 
 from service.jobs import EVENTS_CHANNEL, JobService
@@ -27,7 +26,7 @@ async def job_events(
     pubsub = client.pubsub()
     await pubsub.subscribe(EVENTS_CHANNEL.format(job_id))
     try:
-        view = await run_in_threadpool(jobs.get, job_id)
+        view = await jobs.aget(job_id)
         if view is None:
             return
         yield _status_event(view)
@@ -43,7 +42,7 @@ async def job_events(
             if event is None and time.monotonic() - last_sync_s < resync_s:
                 continue
             last_sync_s = time.monotonic()
-            latest = await run_in_threadpool(jobs.get, job_id)
+            latest = await jobs.aget(job_id)
             if latest is None:  # deleted
                 return
             if latest.status != view.status or event is not None:

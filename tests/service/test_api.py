@@ -141,6 +141,10 @@ def test_listing_filters_and_paginates(live_service: LiveService) -> None:
     assert [j["id"] for j in page["items"]] == [ids[0]]
     assert [j["id"] for j in client.list(status="canceled")["items"]] == [ids[0]]
     assert client.list(status="queued")["total"] == 4
+    # Missing artifacts and escapes from the job's folder are 404s.
+    for name in ("image.exr", "..%2F..%2Fadmin.token", "chunks/../../x"):
+        response = client.http.get(f"/v1/jobs/{ids[2]}/artifacts/{name}")
+        assert response.status_code == 404, name
     # Delete removes record and artifacts.
     client.delete(ids[1])
     assert client.list()["total"] == 4

@@ -26,8 +26,7 @@ from service.models import (
     JobView,
     Problem,
 )
-from service.store.base import ArtifactNotFoundError, validate_key
-from service.store.filesystem import FilesystemStore
+from service.store.base import validate_key
 from service.submissions import scene_from_json, scene_from_upload
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
@@ -216,10 +215,8 @@ def download_artifact(
     except ValueError:
         raise JobNotFoundError(f"{job_id}/{name}") from None
     media_type = _MEDIA_TYPES.get("." + name.rsplit(".", 1)[-1].lower(), "application/octet-stream")
-    if isinstance(store, FilesystemStore):
-        path = store.path_for(key)
-        if not path.is_file():
-            raise ArtifactNotFoundError(name)
+    path = store.local_path(key)
+    if path is not None:
         return FileResponse(path, media_type=media_type, filename=path.name)
     pieces = store.iter_bytes(key)
     first = next(pieces, b"")  # raises ArtifactNotFoundError before the response starts
