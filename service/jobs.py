@@ -60,6 +60,7 @@ _OWNER_INDEX_KEY = "hgrender:jobs:owner:{}"
 _BY_STATE_KEY = "hgrender:jobs:by_state"
 _IDEMPOTENCY_KEY = "hgrender:idempotency:{}:{}"
 EVENTS_CHANNEL = "hgrender:events:{}"
+_IDEMPOTENCY_WAIT_S = 2.0
 
 # KEYS: job hash, by-state hash. ARGV: new status, n allowed, allowed..., then field/value pairs to set.
 # Returns the previous status, or false when the job is missing or the transition is not allowed.
@@ -179,13 +180,9 @@ class JobService:
         chunk_count = self.plan(spp, chunks)
         job_id = uuid.uuid4().hex
         if idempotency_key is not None:
-            key = _IDEMPOTENCY_KEY.format(owner, idempotency_key)
-            if not self.client.set(key, job_id, nx=True, ex=self.settings.idempotency_ttl_s):
-                existing = self.client.get(key)
-                view = self.get(existing.decode()) if existing else None
-                if view is not None:
-                    return view, False
-                self.client.set(key, job_id, ex=self.settings.idempotency_ttl_s)
+            earlier = self._claim_idempotency_key(owner, idempotency_key, job_id)
+            if earlier is not None:
+                return earlier, False
         for relative_name, data in (extra_files or {}).items():
             self.store.put_bytes(f"jobs/{job_id}/input/{relative_name}", data)
         now = time.time()
@@ -212,6 +209,25 @@ class JobService:
             raise
         view = build_view(record, {f"{i}.status": "queued" for i in range(chunk_count)}, now)
         return view, True
+
+    def _claim_idempotency_key(self, owner: str, idempotency_key: str, job_id: str) -> JobView | None:
+        """Claim the key for ``job_id``; if an earlier request holds it, return that job (waiting up to
+        ``_IDEMPOTENCY_WAIT_S`` for a concurrent request to commit it). A claim whose job never appeared
+        (its request failed) is taken over."""
+        key = _IDEMPOTENCY_KEY.format(owner, idempotency_key)
+        ttl_s = self.settings.idempotency_ttl_s
+        if self.client.set(key, job_id, nx=True, ex=ttl_s):
+            return None
+        deadline = time.monotonic() + _IDEMPOTENCY_WAIT_S
+        while True:
+            existing = self.client.get(key)
+            view = self.get(existing.decode()) if existing else None
+            if view is not None:
+                return view
+            if time.monotonic() > deadline:
+                self.client.set(key, job_id, ex=ttl_s)
+                return None
+            time.sleep(0.05)
 
     def _commit(
         self,

@@ -42,6 +42,45 @@ class JobOptions(BaseModel):
     name: str | None = Field(None, max_length=200, description="Free-form label shown in listings.")
 
 
+EXAMPLE_SCENE: dict[str, Any] = {
+    "schema": "hgrender/scene/v1",
+    "name": "lit floor",
+    "camera": {
+        "type": "perspective",
+        "origin_m": [0, 1, 3],
+        "target_m": [0, 0, 0],
+        "up": [0, 1, 0],
+        "fov_deg": 40,
+    },
+    "film": {"width": 32, "height": 32, "bands": 8, "spp": 16},
+    "materials": {"white": {"type": "diffuse", "reflectance": 0.75}},
+    "shapes": [
+        {
+            "type": "rectangle",
+            "material": "white",
+            "center_m": [0, 0, 0],
+            "normal": [0, 1, 0],
+            "up": [0, 0, -1],
+            "width_m": 2,
+            "height_m": 2,
+        }
+    ],
+    "emitters": [
+        {
+            "type": "rectangle",
+            "center_m": [0, 1.5, 0],
+            "normal": [0, -1, 0],
+            "up": [0, 0, -1],
+            "width_m": 0.5,
+            "height_m": 0.5,
+            "spectrum": {"type": "d65"},
+            "power_w": 40.0,
+        }
+    ],
+}
+"""A small valid scene (a lit floor) for the OpenAPI examples."""
+
+
 class JobCreate(JobOptions):
     """``POST /v1/jobs`` JSON body."""
 
@@ -52,7 +91,7 @@ class JobCreate(JobOptions):
         json_schema_extra={
             "examples": [
                 {
-                    "scene": {"schema": "hgrender/scene/v1", "...": "see GET /v1/schemas/scene"},
+                    "scene": EXAMPLE_SCENE,
                     "priority": "normal",
                     "spp": 64,
                     "chunks": 4,

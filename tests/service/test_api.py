@@ -131,6 +131,21 @@ def test_idempotency_key_returns_the_first_job(live_service: LiveService) -> Non
     assert first.json()["id"] == second.json()["id"]
 
 
+def test_concurrent_requests_with_one_idempotency_key_make_one_job(live_service: LiveService) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    token = live_service.token("fiona")
+
+    def submit(_: int) -> str:
+        with live_service.client(token) as client:
+            return client.submit(tiny_scene(), chunks=1, idempotency_key="race-1")["id"]
+
+    with ThreadPoolExecutor(8) as pool:
+        ids = set(pool.map(submit, range(8)))
+    assert len(ids) == 1
+    assert live_service.client(token).list()["total"] == 1
+
+
 def test_listing_filters_and_paginates(live_service: LiveService) -> None:
     client = live_service.client(live_service.token("gina"))
     ids = [client.submit(tiny_scene(), chunks=1)["id"] for _ in range(5)]
@@ -216,3 +231,12 @@ def test_coherence_endpoint_matches_van_cittert_zernike(live_service: LiveServic
     assert result["l1_um"] == pytest.approx(expected_um, rel=1e-9)
     response = client.http.post("/v1/coherence", json={"source": "disk", "radius_m": -1, "distance_m": 1})
     assert response.status_code == 422 and response.json()["detail"].startswith("radius_m")
+
+
+def test_openapi_example_scene_is_valid() -> None:
+    from schemas import validate_scene
+    from service.models import EXAMPLE_SCENE, JobCreate
+
+    validate_scene(EXAMPLE_SCENE)
+    example = JobCreate.model_json_schema()["examples"][0]
+    assert JobCreate.model_validate(example).scene == EXAMPLE_SCENE
