@@ -88,7 +88,7 @@ def render_chunk(
     sums = renderer.render_sums(chunk.spp, chunk.seed, progress=progress, should_stop=should_stop)
     seconds = time.perf_counter() - start
     buffer = io.BytesIO()
-    np.savez_compressed(
+    np.savez(  # uncompressed: zlib on float data costs more than it saves
         buffer,
         **sums.to_arrays(),
         seconds=np.array(seconds),
