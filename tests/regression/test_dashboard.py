@@ -1,0 +1,88 @@
+"""The regression dashboard (``web/regression/``) in headless Chromium (Debian's ``/usr/bin/chromium``
+driven by Playwright) against a live API and a real worker: the schedules table, a schedule's runs with
+the ΔE₀₀ p95 trend plot (a passing run is a filled dot, a failing one a ring), and a failing scene's
+baseline against its current render in the viewer's compare view.
+Screenshot: test-artifacts/regression-dashboard.png."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.regression.test_api import Client, suite
+from tests.service.conftest import LiveService
+from tests.web.conftest import screenshot
+
+pytestmark = pytest.mark.browser
+
+CHROMIUM = Path("/usr/bin/chromium")
+
+
+@pytest.fixture()
+def page(live_service: LiveService) -> Iterator[Any]:
+    if not CHROMIUM.is_file():
+        pytest.fail(f"{CHROMIUM} is missing: install Debian's chromium package (make setup does)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(
+            executable_path=str(CHROMIUM), args=["--headless=new", "--no-sandbox", "--disable-gpu"]
+        )
+        context = browser.new_context(viewport={"width": 1280, "height": 900})
+        context.add_init_script(
+            f"window.localStorage.setItem('hgrender.token', {live_service.admin_token!r});"
+        )
+        page = context.new_page()
+        errors: list[str] = []
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        try:
+            yield page
+        finally:
+            browser.close()
+        assert not errors, errors
+
+
+def test_dashboard_shows_schedules_trend_and_compare(live_service: LiveService, page: Any) -> None:
+    live_service.start_worker()
+    api = Client(live_service)
+    reference = api.post(
+        "/v1/schedules", {"name": "reference", "interval_s": 86400, "suite": suite()}, expect=201
+    )
+    changed = api.post(
+        "/v1/schedules", {"name": "bigger light", "interval_s": 86400, "suite": suite(0.012)}, expect=201
+    )
+    baseline_run = api.run_to_end(reference["id"])
+    passing_run = api.run_to_end(reference["id"])
+    failing_run = api.run_to_end(changed["id"])
+    assert (baseline_run["status"], passing_run["status"], failing_run["status"]) == (
+        "passed",
+        "passed",
+        "failed",
+    )
+
+    page.goto(f"{live_service.base_url}/web/regression/index.html")
+    rows = page.locator("#schedules tbody tr")
+    rows.first.wait_for()
+    assert rows.count() == 2
+    assert "every 86400 s" in page.locator("#schedules").inner_text()
+
+    # The reference schedule: two runs, the second compared (a filled dot on the trend plot).
+    page.get_by_role("button", name="reference").click()
+    page.locator("#runs tbody tr").nth(1).wait_for()
+    assert page.locator("#runs tbody tr").count() == 2
+    assert page.locator("#trend circle").count() == 1
+    assert page.locator("#trend circle").get_attribute("fill") != "none"
+
+    # The failing schedule: a ring on the plot, the reason in the table, and the compare view.
+    page.get_by_role("button", name="bigger light").click()
+    page.locator("#runs tbody tr td.run-status-failed").wait_for()
+    assert page.locator("#trend circle").get_attribute("fill") == "none"
+    assert "thin_film: coherence_drift of l1_um" in page.locator("#runs").inner_text()
+    page.locator("#runs button.verdict-fail").click()
+    page.locator("#compare section.compare canvas").first.wait_for()
+    caption = page.locator("#compare-caption").inner_text()
+    assert baseline_run["scenes"][0]["job_id"] in caption and failing_run["scenes"][0]["job_id"] in caption
+    screenshot(page, "regression-dashboard")
