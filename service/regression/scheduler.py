@@ -3,7 +3,8 @@
 * Leader election: any number of scheduler processes may run; the one holding the Redis lease
   ``hgrender:regression:scheduler:leader`` (SET NX PX, renewed every ttl/3, compare-and-renew in Lua) runs
   APScheduler's ``BackgroundScheduler``; the others wait and take over at most ``regression_leader_ttl_s``
-  after the leader dies. A leader that fails to renew stops its scheduler before the lease can pass on.
+  after the leader dies. A leader whose renewal fails (it was paused past the lease) stops its scheduler at
+  once; in the moment both may run, the due-time claims below keep every run unique.
 * Schedules (``service.regression.store``) are the source of truth; the leader mirrors them into APScheduler
   jobs (cron: ``CronTrigger.from_crontab`` in the schedule's time zone; interval: ``IntervalTrigger`` anchored
   at the schedule's creation time, so every process computes the same due times). Next run times persist in
