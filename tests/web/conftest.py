@@ -40,10 +40,11 @@ SIZE_PX = 24
 SPP = 4
 
 # A diffuse plane (y = 0) seen straight from above (camera up = world −z, so image +x = world +x and
-# image up = world −z) under a thin cylinder light along world x. The cylinder's transverse extent is
-# long along x and 2R across, so coherence is short along x and long across: ℓ₁ ⟂ the axis, i.e. along
-# image y (vertical ellipses, angle = ±π/2). By the mirror symmetry of the scene about the plane z = 0
-# through each floor point's direction to the cylinder, this holds at every floor pixel.
+# image +y up = world −z) under a thin cylinder light with unit axis a. Seen from a floor point along the
+# unit direction d to the cylinder, the source is a strip along the projection of a onto the transverse
+# plane, so coherence is longest across it: ℓ₁ ∥ d × a. For a = x̂: d × a = (0, d_z, −d_y), whose
+# image-plane (x, −z) components are (0, d_y): vertical (angle ±π/2) at every floor pixel. For
+# a = (x̂ + ẑ)/√2: d × a ∝ (d_y, d_z − d_x, −d_y) → image (d_y, d_y): angle π/4 everywhere.
 CYLINDER_SCENE: dict[str, Any] = {
     "schema": "hgrender/scene/v1",
     "name": "plane under a cylinder light",
@@ -80,9 +81,13 @@ CYLINDER_SCENE: dict[str, Any] = {
 }
 
 
-def cylinder_scene(**film: Any) -> dict[str, Any]:
+def cylinder_scene(axis_end_m: tuple[float, float] = (0.3, 0.0), **film: Any) -> dict[str, Any]:
+    """The scene with film overrides; the cylinder runs from −end to +end in (x, z) at height 0.5 m."""
     scene = copy.deepcopy(CYLINDER_SCENE)
     scene["film"].update(film)
+    end_x_m, end_z_m = axis_end_m
+    scene["emitters"][0]["p0_m"] = [-end_x_m, 0.5, -end_z_m]
+    scene["emitters"][0]["p1_m"] = [end_x_m, 0.5, end_z_m]
     return scene
 
 
@@ -204,6 +209,15 @@ def cylinder_job_reseeded(served: Served, tmp_path_factory: pytest.TempPathFacto
     """The same scene with another seed: a different noise pattern to compare against."""
     job_id = served.render(cylinder_scene(seed=7), "cylinder seed 7")
     out_dir = tmp_path_factory.mktemp("cylinder-job-7")
+    served.client.download(job_id, "image.exr", out_dir / "image.exr")
+    return RenderedJob(job_id, read_exr(out_dir / "image.exr"))
+
+
+@pytest.fixture(scope="session")
+def diagonal_cylinder_job(served: Served, tmp_path_factory: pytest.TempPathFactory) -> RenderedJob:
+    """The cylinder along (x̂ + ẑ)/√2: ℓ₁ at +45° in the image (up and to the right)."""
+    job_id = served.render(cylinder_scene(axis_end_m=(0.3, 0.3)), "diagonal cylinder")
+    out_dir = tmp_path_factory.mktemp("diagonal-job")
     served.client.download(job_id, "image.exr", out_dir / "image.exr")
     return RenderedJob(job_id, read_exr(out_dir / "image.exr"))
 

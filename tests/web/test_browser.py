@@ -181,6 +181,32 @@ def test_ellipses_are_vertical_for_a_cylinder_light(
     screenshot(page, "viewer_ellipses")
 
 
+def test_ellipses_are_drawn_with_the_angle_convention(
+    page: Any, served: Served, diagonal_cylinder_job: RenderedJob
+) -> None:
+    """`angle` is counter-clockwise from +x with image +y up: ℓ₁ at +45° runs up and to the right."""
+    open_viewer(page, served, diagonal_cylinder_job.job_id)
+    page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
+    directions = page.evaluate(
+        """() => [...document.querySelectorAll('#ellipse-overlay ellipse')].map((e) => {
+            // End points of the major (rx) axis, mapped to screen pixels by the element's full transform.
+            const m = e.getScreenCTM();
+            const cx = Number(e.getAttribute('cx')), cy = Number(e.getAttribute('cy'));
+            const rx = Number(e.getAttribute('rx'));
+            const a = new DOMPoint(cx - rx, cy).matrixTransform(m);
+            const b = new DOMPoint(cx + rx, cy).matrixTransform(m);
+            return [b.x - a.x, b.y - a.y, Number(e.dataset.angle)];
+        })"""
+    )
+    assert len(directions) >= 4
+    for dx, dy, angle in directions:
+        # Screen y grows downwards: the drawn axis must be parallel to (cos θ, −sin θ).
+        cross = dx * -np.sin(angle) - dy * np.cos(angle)
+        assert abs(cross) < 1e-3 * np.hypot(dx, dy)
+        assert dx * dy < 0  # up and to the right (or down and to the left): the +45° diagonal
+    screenshot(page, "viewer_ellipses_diagonal")
+
+
 def test_inspector_spectrum_equals_the_exr(page: Any, served: Served, cylinder_job: RenderedJob) -> None:
     open_viewer(page, served, cylinder_job.job_id)
     exr = cylinder_job.exr

@@ -104,8 +104,8 @@ def test_ellipses_are_the_diagnostics_at_grid_centres_and_vertical(
         x, y = ellipse["x"], ellipse["y"]
         for name in ("l1_um", "l2_um", "angle", "area_um2"):
             assert ellipse[name] == float(exr.channels[f"coherence.{name}"][y, x])
-        # ℓ₁ ⟂ the cylinder axis (world x = image x): vertical, |cos angle| = 0 by symmetry; 1e-3 allows
-        # float32 rounding of ½·atan2 of the luminance-weighted (sin 2θ, cos 2θ) sums.
+        # ℓ₁ ∥ d × x̂ projects onto the image's vertical (conftest); 1e-3 rad allows float32 rounding
+        # of ½·atan2 of the luminance-weighted (sin 2θ, cos 2θ) sums.
         assert abs(math.cos(ellipse["angle"])) < 1e-3
         # The cylinder is 0.6 m long and 4 mm wide: strongly anisotropic coherence (ℓ₁/ℓ₂ ≫ 10).
         assert ellipse["l1_um"] > 10 * ellipse["l2_um"]
@@ -224,3 +224,13 @@ def test_openapi_documents_the_viewer_endpoints(served: Served) -> None:
     ):
         assert "get" in paths[path], path
     assert "/" not in paths  # the web pages are not API
+
+
+def test_diagonal_cylinder_gives_45_degree_ellipses(
+    served: Served, diagonal_cylinder_job: RenderedJob
+) -> None:
+    grid = served.get(f"/v1/jobs/{diagonal_cylinder_job.job_id}/ellipses", spacing=6).json()["ellipses"]
+    assert len(grid) >= 8
+    for ellipse in grid:
+        # ℓ₁ ∥ d × (x̂ + ẑ)/√2 projects onto the image diagonal (1, 1) (conftest): angle π/4 (mod π).
+        assert abs(math.remainder(ellipse["angle"] - math.pi / 4, math.pi)) < 1e-3
