@@ -67,6 +67,7 @@ class RenderContext:
     rect_coefficients: dict
     black_material: int  # index of the absorbing material (emitters, misses)
     rect_sources: bool  # whether any emitter is a rectangle or a cylinder
+    camera_position: Any  # world-space centre of projection (Point3f)
     camera_right: Any  # world-space unit vectors of the image's +x and +y (up) directions
     camera_up: Any
 
@@ -281,7 +282,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             # First-hit AOVs (camera-visible surface).
             first = valid & (depth == 0)
-            aov_depth = dr.select(first, si.t, aov_depth)
+            # Distance from the camera's centre (rays start on the near-clip plane, so si.t is shorter).
+            aov_depth = dr.select(first, dr.norm(si.p - self.context.camera_position), aov_depth)
             aov_normal = dr.select(first, si.sh_frame.n, aov_normal)
             aov_material = dr.select(first, material, aov_material)
 

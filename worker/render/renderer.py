@@ -124,7 +124,8 @@ class Renderer:
         camera_right, camera_up = mi.Vector3f(*right), mi.Vector3f(*up)
         # Opaque: as literals their order in the IR changed between the first and later traces, so the first
         # render compiled a kernel that no later render reused.
-        dr.make_opaque(camera_right, camera_up)
+        camera_position = mi.Point3f(*self.sensor.world_transform().translation())
+        dr.make_opaque(camera_right, camera_up, camera_position)
         kinds = {record.kind for record in compiled.emitter_table.records}
         return RenderContext(
             bands=compiled.bands,
@@ -141,6 +142,7 @@ class Renderer:
             rect_sources=bool(kinds & {EmitterKind.RECTANGLE, EmitterKind.CYLINDER}),
             camera_right=camera_right,
             camera_up=camera_up,
+            camera_position=camera_position,
         )
 
     def _screen_axes(self) -> tuple[list[float], list[float]]:
