@@ -217,6 +217,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         has_grating = mat.MaterialKind.GRATING in kinds
         span_nm = self.context.bands.wavelength_max_nm - self.context.bands.wavelength_min_nm
         film_beams = self.kernels.max_beams
+        coherence_materials = has_film or has_grating
 
         wavelengths = mi.Spectrum(ray.wavelengths)
         y_weights = [
@@ -289,58 +290,66 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             # --- resolve the pending vertex's incident coherence: the source is what we just reached
             resolve = pending & (hit_emitter | nonspecular)
-            to_prev = -ray.d
             em_record = self._emitter_lookup(emitter_ptr)
-            em_sxx, em_sxy, em_syy = emitter_coherence(
-                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, ray.d, frame_x, frame_y
-            )
-            sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, to_prev, frame_x, frame_y)
-            src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
-            src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
-            src_yy = dr.select(hit_emitter, em_syy, sr_yy)
-            # An emitter's coherence propagates from its centre (as in NEE): replace the last segment's length
-            # by the distance from the segment's origin to that centre.
-            centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray.o)
-            chain_distance = dr.select(
-                hit_emitter, chain_distance - segment + centre_distance, chain_distance
-            )
-            resolved = IncidentCoherence(
-                src_xx,
-                src_xy,
-                src_yy,
-                chain_distance,
-                frame_x,
-                frame_y,
-                hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
-            )
-            if has_film:
-                # An emitter reached straight from the film: its interference phase is taken towards the
-                # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
-                centre_phase = hit_emitter & ~chain_specular
-                _, emitter_to_film = emitter_direction(
-                    mi, self.context.emitter_flat, em_record, film_position
+            # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
+            if resolve:
+                to_prev = -ray.d
+                em_sxx, em_sxy, em_syy = emitter_coherence(
+                    mi,
+                    self.context.emitter_flat,
+                    self.context.emitter_kinds,
+                    em_record,
+                    ray.d,
+                    frame_x,
+                    frame_y,
                 )
-                cos_centre = -dr.dot(emitter_to_film, film_normal)
-                centre_terms = self.kernels.film_terms(film_material, cos_centre, wavelengths)
-                phase_terms = list(film_terms)
-                for slot in range(film_beams):
-                    phase_terms[slot] = dr.select(centre_phase, centre_terms[slot], film_terms[slot])
-                film_factor = combine_film_terms(
-                    phase_terms,
-                    lambda d, c=resolved, v=film_separation: self.visibility(c, v * d, wavelengths),
+                sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, to_prev, frame_x, frame_y)
+                src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
+                src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
+                src_yy = dr.select(hit_emitter, em_syy, sr_yy)
+                # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
+                # becomes the distance from the segment's origin to that centre.
+                centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray.o)
+                chain_distance = dr.select(
+                    hit_emitter, chain_distance - segment + centre_distance, chain_distance
                 )
-                film_factor = film_factor / dr.maximum(film_terms[0], 1e-12)
-                beta = dr.select(resolve & film_pending, beta * film_factor, beta)
-            record_indirect = resolve & pending_first
-            scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(chain_distance, 1e-9))
-            c2, s2 = self._screen_angle_terms(src_xx, src_xy, src_yy, first_frame_x, first_frame_y)
-            ind_mxx = dr.select(record_indirect, scale2 * src_xx, ind_mxx)
-            ind_mxy = dr.select(record_indirect, scale2 * src_xy, ind_mxy)
-            ind_myy = dr.select(record_indirect, scale2 * src_yy, ind_myy)
-            ind_r = dr.select(record_indirect, chain_distance, ind_r)
-            ind_c2 = dr.select(record_indirect, c2, ind_c2)
-            ind_s2 = dr.select(record_indirect, s2, ind_s2)
-            indirect_ready |= record_indirect
+                resolved = IncidentCoherence(
+                    src_xx,
+                    src_xy,
+                    src_yy,
+                    chain_distance,
+                    frame_x,
+                    frame_y,
+                    hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
+                )
+                if has_film:
+                    # An emitter reached straight from the film: its interference phase is taken towards the
+                    # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
+                    centre_phase = hit_emitter & ~chain_specular
+                    _, emitter_to_film = emitter_direction(
+                        mi, self.context.emitter_flat, em_record, film_position
+                    )
+                    cos_centre = -dr.dot(emitter_to_film, film_normal)
+                    centre_terms = self.kernels.film_terms(film_material, cos_centre, wavelengths)
+                    phase_terms = list(film_terms)
+                    for slot in range(film_beams):
+                        phase_terms[slot] = dr.select(centre_phase, centre_terms[slot], film_terms[slot])
+                    film_factor = combine_film_terms(
+                        phase_terms,
+                        lambda d, c=resolved, v=film_separation: self.visibility(c, v * d, wavelengths),
+                    )
+                    film_factor = film_factor / dr.maximum(film_terms[0], 1e-12)
+                    beta = dr.select(resolve & film_pending, beta * film_factor, beta)
+                record_indirect = resolve & pending_first
+                scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(chain_distance, 1e-9))
+                c2, s2 = self._screen_angle_terms(src_xx, src_xy, src_yy, first_frame_x, first_frame_y)
+                ind_mxx = dr.select(record_indirect, scale2 * src_xx, ind_mxx)
+                ind_mxy = dr.select(record_indirect, scale2 * src_xy, ind_mxy)
+                ind_myy = dr.select(record_indirect, scale2 * src_yy, ind_myy)
+                ind_r = dr.select(record_indirect, chain_distance, ind_r)
+                ind_c2 = dr.select(record_indirect, c2, ind_c2)
+                ind_s2 = dr.select(record_indirect, s2, ind_s2)
+                indirect_ready |= record_indirect
             pending &= ~resolve
             film_pending &= ~resolve
 
@@ -380,16 +389,28 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             do_nee &= ds_em.pdf != 0.0
             em_record_nee = self._emitter_lookup(ds_em.emitter)
             nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
-            nee_fx, nee_fy = self._frame_for(nee_dir)
-            nee_sxx, nee_sxy, nee_syy = emitter_coherence(
-                mi,
-                self.context.emitter_flat,
-                self.context.emitter_kinds,
-                em_record_nee,
-                nee_dir,
-                nee_fx,
-                nee_fy,
-            )
+            # The emitter's Σ⊥ matters for diagnostics at the first non-specular vertex and for
+            # coherence-sensitive materials; elsewhere the symbolic branch is skipped.
+            nee_fx = mi.Vector3f(1.0, 0.0, 0.0)
+            nee_fy = mi.Vector3f(0.0, 1.0, 0.0)
+            nee_sxx = mi.Float(0.0)
+            nee_sxy = mi.Float(0.0)
+            nee_syy = mi.Float(0.0)
+            nee_c2 = mi.Float(0.0)
+            nee_s2 = mi.Float(0.0)
+            needs_nee_coherence = do_nee & (~seen_nonspecular | coherence_materials)
+            if needs_nee_coherence:
+                nee_fx, nee_fy = self._frame_for(nee_dir)
+                nee_sxx, nee_sxy, nee_syy = emitter_coherence(
+                    mi,
+                    self.context.emitter_flat,
+                    self.context.emitter_kinds,
+                    em_record_nee,
+                    nee_dir,
+                    nee_fx,
+                    nee_fy,
+                )
+                nee_c2, nee_s2 = self._screen_angle_terms(nee_sxx, nee_sxy, nee_syy, nee_fx, nee_fy)
             nee_coherence = IncidentCoherence(
                 nee_sxx,
                 nee_sxy,
@@ -418,7 +439,6 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # Direct light at the first non-specular vertex: the emitter's own Σ⊥ (camera-aligned frame).
             at_first = do_nee & ~seen_nonspecular
             nee_scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(nee_r, 1e-9))
-            nee_c2, nee_s2 = self._screen_angle_terms(nee_sxx, nee_sxy, nee_syy, nee_fx, nee_fy)
             direct_m = (nee_scale2 * nee_sxx, nee_scale2 * nee_sxy, nee_scale2 * nee_syy)
             use_ind = do_nee & seen_nonspecular & indirect_ready
             w_first = dr.select(at_first, weight_direct, 0.0)
@@ -444,8 +464,12 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             beta = dr.select(continue_path, beta * weight, 0.0)
 
             # Start a new pending record at a non-specular vertex; carry it through specular ones.
-            new_record = continue_path & nonspecular
-            incoming_fx, incoming_fy = self._frame_for(-wo_world)
+            # Without thin films only the first non-specular vertex needs its incident coherence.
+            new_record = continue_path & nonspecular & (~seen_nonspecular | has_film)
+            incoming_fx = mi.Vector3f(frame_x)
+            incoming_fy = mi.Vector3f(frame_y)
+            if new_record:
+                incoming_fx, incoming_fy = self._frame_for(-wo_world)
             frame_x = dr.select(new_record, incoming_fx, frame_x)
             frame_y = dr.select(new_record, incoming_fy, frame_y)
             first_frame_x = dr.select(new_record & ~seen_nonspecular, incoming_fx, first_frame_x)
