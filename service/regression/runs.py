@@ -63,9 +63,8 @@ def resolve_scene(
         assert entry.scene is not None
         scene = dict(entry.scene)
     film = dict(scene.get("film", {}))
-    film.update(
-        {k: v for k, v in (("spp", entry.spp), ("width", entry.width), ("height", entry.height)) if v}
-    )
+    overrides = (("spp", entry.spp), ("width", entry.width), ("height", entry.height))
+    film.update({key: value for key, value in overrides if value is not None})
     film["seed"] = seed
     return validate_scene({**scene, "film": film}).to_json_dict()
 
@@ -81,6 +80,12 @@ class RunService:
     def job_scene(self, job_id: str) -> dict[str, Any]:
         """The stored scene document of an earlier job."""
         return self.jobs.scene(job_id)
+
+    def validate_suite(self, suite: Suite) -> None:
+        """Resolve every scene once (SceneError / ValueError name the problem), so that a schedule with a
+        scene that cannot render is refused when it is created rather than failing at every due time."""
+        for entry in suite.scenes:
+            resolve_scene(entry, 0, self.job_scene)
 
     def start_run(
         self,

@@ -130,9 +130,19 @@ def test_schedule_lifecycle_and_validation(live_service: LiveService) -> None:
         ({"name": "x", "cron": "0 2 * * *", "interval_s": 60, "suite": suite()}, "cron"),
         ({"name": "x", "interval_s": 60, "timezone": "Mars/Olympus", "suite": suite()}, "timezone"),
         ({"name": "x", "interval_s": 60, "suite": {"scenes": []}}, "scenes"),
+        ({"name": "x", "interval_s": 60, "suite": {"scenes": [{"example": "no_such_scene"}]}}, "example"),
+        ({"name": "x", "interval_s": 60, "suite": {"scenes": [{"example": "cornell_box", "spp": 0}]}}, "spp"),
     ):
         response = api.http.post("/v1/schedules", json=body)
         assert response.status_code == 422 and field in response.text, (body, response.text)
+
+
+def test_a_scene_that_cannot_render_is_refused_at_creation(live_service: LiveService) -> None:
+    api = Client(live_service)
+    broken = suite()
+    broken["scenes"][0]["scene"]["emitters"][0]["radius_m"] = -1.0
+    response = api.http.post("/v1/schedules", json={"name": "broken", "interval_s": 60, "suite": broken})
+    assert response.status_code == 422 and "/emitters/0/radius_m" in response.text, response.text
 
 
 def test_other_owners_cannot_see_schedules(live_service: LiveService) -> None:

@@ -74,8 +74,15 @@ def _run(runs: RunService, principal: Principal, run_id: str) -> RunView:
 
 @router.post("/schedules", status_code=status.HTTP_201_CREATED, responses=_ERRORS, tags=["regression"])
 def create_schedule(body: ScheduleCreate, request: Request, principal: Submitter) -> ScheduleView:
-    """Create a schedule; the scheduler picks it up within a second."""
-    return _runs(request).regression.create_schedule(body, principal.owner)
+    """Create a schedule (its scenes are validated first); the scheduler picks it up within a second."""
+    runs = _runs(request)
+    for entry in body.suite.scenes:
+        if entry.job_id is not None:
+            view = runs.jobs.get(entry.job_id)
+            if view is None or not principal.can_see(view.owner):
+                raise JobNotFoundError(entry.job_id)
+    runs.validate_suite(body.suite)
+    return runs.regression.create_schedule(body, principal.owner)
 
 
 @router.get("/schedules", responses=_ERRORS)
