@@ -120,7 +120,9 @@ class ScheduleCreate(BaseModel):
 
     name: str = Field(min_length=1, max_length=200)
     cron: str | None = Field(None, description="5-field cron expression, evaluated in `timezone`.")
-    interval_s: int | None = Field(None, ge=1, description="Run every this many seconds (instead of cron).")
+    interval_s: int | None = Field(
+        None, ge=1, le=366 * 24 * 3600, description="Run every this many seconds (instead of cron), ≤ 1 year."
+    )
     timezone: str = Field("UTC", description="IANA time zone of the cron expression.")
     suite: Suite
     webhook_url: HttpUrl | None = Field(None, description="POSTed a JSON report when a run fails.")

@@ -175,24 +175,31 @@ class RegressionScheduler:
         for job_id in jobs.keys() - schedules.keys():
             scheduler.remove_job(job_id)
         for schedule_id, schedule in schedules.items():
-            job = jobs.get(schedule_id)
-            if job is None:
-                # First due time counted from the schedule's creation, not from when a scheduler first
-                # saw it: one created while no scheduler ran still gets its first run (misfire policy).
-                trigger = trigger_for(schedule)
-                created = datetime.fromtimestamp(schedule.created_at, UTC)
-                job = scheduler.add_job(
-                    fire_placeholder,
-                    trigger,
-                    args=(schedule_id,),
-                    id=schedule_id,
-                    name=schedule.name,
-                    next_run_time=trigger.get_next_fire_time(None, created),
-                )
-            if schedule.paused and job.next_run_time is not None:
-                scheduler.pause_job(schedule_id)
-            elif not schedule.paused and job.next_run_time is None:
-                scheduler.resume_job(schedule_id)
+            try:
+                self._sync_one(scheduler, schedule, jobs.get(schedule_id))
+            except Exception:  # one broken schedule must not stop the others
+                log.exception("schedule %s: not scheduled", schedule_id)
+
+    @staticmethod
+    def _sync_one(scheduler: BackgroundScheduler, schedule: ScheduleView, job: Job | None) -> None:
+        """Add the schedule's job if missing; pause or resume it to match the schedule."""
+        if job is None:
+            # First due time counted from the schedule's creation, not from when a scheduler first saw
+            # it: one created while no scheduler ran still gets its first run (misfire policy).
+            trigger = trigger_for(schedule)
+            created = datetime.fromtimestamp(schedule.created_at, UTC)
+            job = scheduler.add_job(
+                fire_placeholder,
+                trigger,
+                args=(schedule.id,),
+                id=schedule.id,
+                name=schedule.name,
+                next_run_time=trigger.get_next_fire_time(None, created),
+            )
+        if schedule.paused and job.next_run_time is not None:
+            scheduler.pause_job(schedule.id)
+        elif not schedule.paused and job.next_run_time is None:
+            scheduler.resume_job(schedule.id)
 
     def lead(self) -> None:
         """Run APScheduler while this process holds the lease."""

@@ -105,3 +105,29 @@ def test_killed_leader_is_replaced_without_losing_or_duplicating_a_due_time(sett
     times = due_times(store, schedule_id)
     # The due time missed while down (within the misfire grace) is run late, once; the rest on time.
     assert_every_due_time_once(times, created_at, expected_at_least=fired_before + 3)
+
+
+def test_pause_skips_due_times_and_resume_continues_on_the_grid(settings: Settings) -> None:
+    store, schedule_id, created_at = make_schedule(settings)
+    scheduler = start_scheduler(settings, "sched-pause")
+    try:
+        deadline = time.monotonic() + 30
+        while len(due_times(store, schedule_id)) < 1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        store.set_paused(schedule_id, True)
+        paused_at = time.time()
+        time.sleep(1.0)  # the leader re-syncs within SYNC_INTERVAL_S = 1 s
+        fired_while_pausing = len(due_times(store, schedule_id))
+        time.sleep(2 * INTERVAL_S + 0.5)
+        assert len(due_times(store, schedule_id)) == fired_while_pausing  # nothing while paused
+        store.set_paused(schedule_id, False)
+        resumed_at = time.time()
+        time.sleep(2 * INTERVAL_S + 1.0)
+    finally:
+        stop(scheduler)
+    times = due_times(store, schedule_id)
+    steps = [(t - created_at) / INTERVAL_S for t in times]
+    assert all(abs(step - round(step)) < 1e-6 for step in steps), steps  # still on created_at + k·interval
+    after = [t for t in times if t > paused_at + 1.0]
+    assert after and all(t > resumed_at for t in after)  # the pause's due times were skipped, not caught up
+    assert len(set(times)) == len(times)
