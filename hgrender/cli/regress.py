@@ -1,12 +1,19 @@
 """``hgrender regress SUITE`` (local regression check for CI) and ``hgrender scheduler`` (the service's
 regression scheduler as its own process).
 
-``regress`` renders every scene of a suite file (JSON, or YAML for ``.yaml``/``.yml``; the format of
-``service.regression.models.Suite``, see docs/regression.md) locally with ``worker.render.api.render_scene``
-(no service needed), compares each with its baseline in ``--baseline DIR`` (``DIR/<scene>/image.exr`` and
-``variance.exr``) using the service's noise-aware metrics, prints a table and exits 1 if any scene failed
-or could not be compared (0 otherwise). ``--update-baseline`` writes the new renders as the baselines after
-comparing; ``--junit FILE`` writes a JUnit XML report (one test case per scene).
+``regress`` runs a suite file (JSON, or YAML for ``.yaml``/``.yml``; the format of
+``service.regression.models.Suite``, see docs/regression.md) in one of two modes:
+
+* locally (default, no service needed): renders every scene with ``worker.render.api.render_scene`` and
+  compares it with its baseline in ``--baseline DIR`` (``DIR/<scene>/image.exr``, ``variance.exr``,
+  ``summary.json``) using the service's noise-aware metrics; ``--update-baseline`` then stores the new renders
+  as the baselines;
+* against a running service (``--url``; the token from ``--token``, ``HGRENDER_TOKEN`` or
+  ``<data dir>/admin.token``): ``POST /v1/runs`` with the suite, waits for the run and uses the server's
+  baselines; ``--update-baseline`` then promotes the run (``POST /v1/baselines``).
+
+Both print a table, optionally write JUnit XML (``--junit FILE``, one test case per scene) and exit 1 if a
+scene failed or could not be compared, 0 otherwise (2 for an invalid suite or a service error).
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ import shutil
 import signal
 import sys
 import tempfile
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -37,6 +45,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     regress.add_argument("--junit", type=Path, default=None, help="write a JUnit XML report here")
     regress.add_argument("--seed", type=int, default=None, help="base seed (default: random)")
     regress.add_argument("--work-dir", type=Path, default=None, help="keep the renders here")
+    regress.add_argument("--url", default=None, help="run on this service instead of locally")
+    regress.add_argument("--token", default=os.environ.get("HGRENDER_TOKEN"), help="API token (with --url)")
+    regress.add_argument(
+        "--data-dir", type=Path, default=Path("./data"), help="where to find admin.token when no --token"
+    )
+    regress.add_argument("--timeout-s", type=float, default=3600.0, help="longest wait for a service run")
     regress.set_defaults(handler=regress_command)
 
     scheduler = subparsers.add_parser("scheduler", help="run the regression scheduler against REDIS_URL")
@@ -150,13 +164,41 @@ def junit_xml(suite_name: str, results: list[dict[str, Any]]) -> bytes:
     return ET.tostring(ET.ElementTree(testsuite).getroot(), encoding="utf-8", xml_declaration=True)
 
 
+def run_on_service(
+    args: argparse.Namespace, suite: Any, poll_interval_s: float = 1.0
+) -> list[dict[str, Any]]:
+    """``POST /v1/runs``, wait until the run ends, optionally promote it; one result dict per scene."""
+    from hgrender.cli.service import _call, _client
+
+    with _client(args) as client:
+        run = _call(client._json, "POST", "/v1/runs", json={"suite": suite.model_dump(mode="json")})
+        deadline = time.monotonic() + args.timeout_s
+        while run["status"] == "running":
+            if time.monotonic() > deadline:
+                raise CliError(f"timeout_s: run {run['id']} still running after {args.timeout_s} s")
+            time.sleep(poll_interval_s)
+            run = _call(client._json, "GET", f"/v1/runs/{run['id']}")
+        if args.update_baseline:
+            _call(client._json, "POST", "/v1/baselines", json={"run_id": run["id"]})
+    print(f"run {run['id']}: {run['status']}", file=sys.stderr)
+    return [
+        {"scene": r["scene"], "verdict": r["verdict"], "reasons": r["reasons"], "metrics": r["metrics"]}
+        for r in run["scenes"]
+    ]
+
+
 def regress_command(args: argparse.Namespace) -> int:
     suite = load_suite(args.suite)
-    baseline_dir = args.baseline if args.baseline is not None else args.suite.parent / "baselines"
-    seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "little") & 0x7FFFFFFF
-    with tempfile.TemporaryDirectory(prefix="hgrender-regress-") as tmp:
-        work_dir = args.work_dir if args.work_dir is not None else Path(tmp)
-        results = run_suite(suite, baseline_dir, work_dir, seed, args.update_baseline)
+    if args.url is not None:
+        if args.baseline is not None or args.seed is not None or args.work_dir is not None:
+            raise CliError("url: --baseline, --seed and --work-dir apply to local runs only")
+        results = run_on_service(args, suite)
+    else:
+        baseline_dir = args.baseline if args.baseline is not None else args.suite.parent / "baselines"
+        seed = args.seed if args.seed is not None else int.from_bytes(os.urandom(4), "little") & 0x7FFFFFFF
+        with tempfile.TemporaryDirectory(prefix="hgrender-regress-") as tmp:
+            work_dir = args.work_dir if args.work_dir is not None else Path(tmp)
+            results = run_suite(suite, baseline_dir, work_dir, seed, args.update_baseline)
     print(format_table(results))
     if args.junit is not None:
         args.junit.parent.mkdir(parents=True, exist_ok=True)

@@ -183,6 +183,9 @@ class RunView(BaseModel):
     """One run of a suite (scheduled, run-now or promoted)."""
 
     id: str
+    owner: str = Field(
+        description="Owner of the render jobs (the schedule's, or the caller of POST /v1/runs)."
+    )
     schedule_id: str | None = None
     trigger: Literal["schedule", "manual", "cli"]
     due_at: float | None = Field(None, description="The schedule's due time this run fulfils (Unix s).")
@@ -194,6 +197,15 @@ class RunView(BaseModel):
     suite: Suite | None = Field(None, description="The suite as it was when the run started.")
     webhook_url: str | None = None
     webhook: dict[str, Any] | None = Field(None, description="Delivery outcome of the failure webhook.")
+
+
+class RunCreate(BaseModel):
+    """``POST /v1/runs``: run a suite once, outside any schedule (``hgrender regress --url``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    suite: Suite
+    webhook_url: HttpUrl | None = Field(None, description="POSTed a JSON report when the run fails.")
 
 
 class RunList(BaseModel):

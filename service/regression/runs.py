@@ -107,6 +107,7 @@ class RunService:
             results.append(SceneResult(scene=entry.key, job_id=view.id))
         run = RunView(
             id=run_id,
+            owner=owner,
             schedule_id=schedule_id,
             trigger=trigger,  # type: ignore[arg-type]
             due_at=due_at,

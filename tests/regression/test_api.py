@@ -161,3 +161,28 @@ def test_other_owners_cannot_see_schedules(live_service: LiveService) -> None:
         f"{live_service.base_url}/v1/schedules", headers={"Authorization": f"Bearer {token}"}, timeout=30
     )
     assert created["id"] not in [s["id"] for s in listing.json()["items"]]
+
+
+def test_regress_cli_against_the_service(
+    live_service: LiveService, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from hgrender.cli import main
+
+    live_service.start_worker()
+    reference, changed = tmp_path / "suite.json", tmp_path / "changed.json"
+    for path, radius_m in ((reference, 0.006), (changed, 0.012)):
+        body = suite(radius_m)
+        body["scenes"][0]["name"] = "cli_thin_film"
+        path.write_text(json.dumps(body))
+    common = ["--url", live_service.base_url, "--token", live_service.admin_token, "--timeout-s", "120"]
+    # No baseline yet: the first run creates v1; --update-baseline promotes the run again (v2).
+    assert main(["regress", str(reference), *common, "--update-baseline"]) == 0
+    assert Client(live_service).get("/v1/baselines/cli_thin_film")["current"] == 2
+    capsys.readouterr()
+    assert main(["regress", str(reference), *common]) == 0
+    assert f"{'cli_thin_film':<28} pass" in capsys.readouterr().out
+    junit = tmp_path / "report.xml"
+    assert main(["regress", str(changed), *common, "--junit", str(junit)]) == 1
+    assert "cli_thin_film: coherence_drift of l1_um" in capsys.readouterr().out
+    assert 'failures="1"' in junit.read_text()
+    assert main(["regress", str(reference), *common, "--seed", "3"]) == 2  # local-only option

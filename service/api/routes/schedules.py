@@ -1,5 +1,6 @@
 """``/v1/schedules``, ``/v1/runs`` and ``/v1/baselines``: regression schedules (create, list, get, pause,
-resume, run now, delete), their run history with per-scene metric series, and versioned scene baselines.
+resume, run now, delete), their run history with per-scene metric series, one-off runs of a suite, and
+versioned scene baselines.
 Thin: the work happens in ``service.regression``."""
 
 from __future__ import annotations
@@ -17,11 +18,13 @@ from service.regression.models import (
     BaselineList,
     BaselineView,
     PromoteRequest,
+    RunCreate,
     RunList,
     RunView,
     ScheduleCreate,
     ScheduleList,
     ScheduleView,
+    Suite,
 )
 from service.regression.runs import RunService
 from service.regression.scheduler import next_run_times
@@ -67,21 +70,26 @@ def _run(runs: RunService, principal: Principal, run_id: str) -> RunView:
         run = runs.regression.get_run(run_id)
     except RunNotFoundError:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run_id: no run {run_id}") from None
-    if run.schedule_id is not None:
-        _schedule(runs, principal, run.schedule_id)
+    if not principal.can_see(run.owner):
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run_id: no run {run_id}")
     return run
+
+
+def _check_suite(runs: RunService, principal: Principal, suite: Suite) -> None:
+    """Refuse a suite naming jobs the caller cannot see, or with a scene that does not validate."""
+    for entry in suite.scenes:
+        if entry.job_id is not None:
+            view = runs.jobs.get(entry.job_id)
+            if view is None or not principal.can_see(view.owner):
+                raise JobNotFoundError(entry.job_id)
+    runs.validate_suite(suite)
 
 
 @router.post("/schedules", status_code=status.HTTP_201_CREATED, responses=_ERRORS, tags=["regression"])
 def create_schedule(body: ScheduleCreate, request: Request, principal: Submitter) -> ScheduleView:
     """Create a schedule (its scenes are validated first); the scheduler picks it up within a second."""
     runs = _runs(request)
-    for entry in body.suite.scenes:
-        if entry.job_id is not None:
-            view = runs.jobs.get(entry.job_id)
-            if view is None or not principal.can_see(view.owner):
-                raise JobNotFoundError(entry.job_id)
-    runs.validate_suite(body.suite)
+    _check_suite(runs, principal, body.suite)
     return runs.regression.create_schedule(body, principal.owner)
 
 
@@ -152,6 +160,19 @@ def list_schedule_runs(
     _schedule(runs, principal, schedule_id)
     items = runs.regression.list_runs(schedule_id, limit)
     return RunList(items=items, series=run_series(items))
+
+
+@router.post("/runs", status_code=status.HTTP_202_ACCEPTED, responses=_ERRORS)
+def create_run(body: RunCreate, request: Request, principal: Submitter) -> RunView:
+    """Run a suite once against the current baselines (no schedule); follow it with ``GET /v1/runs/{id}``."""
+    runs = _runs(request)
+    _check_suite(runs, principal, body.suite)
+    return runs.start_run(
+        body.suite,
+        principal.owner,
+        trigger="cli",
+        webhook_url=str(body.webhook_url) if body.webhook_url else None,
+    )
 
 
 @router.get("/runs/{run_id}", responses=_ERRORS)
