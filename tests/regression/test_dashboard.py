@@ -36,6 +36,9 @@ def page(live_service: LiveService) -> Iterator[Any]:
             f"window.localStorage.setItem('hgrender.token', {live_service.admin_token!r});"
         )
         page = context.new_page()
+        page.set_default_timeout(
+            60_000
+        )  # the test machine's 2 cores are shared: allow slow renders of the page
         errors: list[str] = []
         page.on("pageerror", lambda error: errors.append(str(error)))
         try:
