@@ -8,6 +8,14 @@ RQ fixes at monitoring interval + 60 s and this worker makes ``worker_heartbeat_
 idle wake-up between maintenance passes, which RQ ties to ``worker_ttl - 15`` and this worker caps at
 ``worker_maintenance_interval_s``. The queue tasks themselves live in ``worker.tasks`` (referenced by
 name, so this module never imports the renderer).
+
+Graceful shutdown (SIGTERM, as Kubernetes and ``docker stop`` send it): RQ's warm shutdown already takes
+no new chunk and waits for the running one. This worker bounds that wait by ``worker_shutdown_grace_s``:
+at the first heartbeat tick after the grace ran out (so within grace + ``worker_monitoring_interval_s``)
+it kills its work horse and puts the chunk back at the front of its queue, without spending one of the
+chunk's retries. A second SIGTERM (cold shutdown) hands the chunk back at once. A chunk is handed back only
+while RQ still records it as started, so a chunk that completed is never queued again; a re-run
+overwrites the same artifact key, so a job ends with one set of artifacts either way.
 """
 
 from __future__ import annotations
@@ -15,18 +23,24 @@ from __future__ import annotations
 import logging
 import socket
 import uuid
+from types import FrameType
 
 import redis
 from rq import Queue, Worker
-from rq.job import Job
+from rq.executions import Execution
+from rq.job import Job, JobStatus
+from rq.utils import now
 
 from service.core.config import QUEUE_NAMES, Settings
 
 
 class RenderWorker(Worker):
-    """An RQ ``Worker`` with a configurable heartbeat grace and maintenance wake-up."""
+    """An RQ ``Worker`` with a configurable heartbeat grace and maintenance wake-up, whose warm shutdown
+    hands its chunk back to the queue after ``shutdown_grace_s``."""
 
     heartbeat_grace_s: int = 60
+    shutdown_grace_s: int = 40
+    _handing_back_job_id: str | None = None
 
     def get_heartbeat_ttl(self, job: Job, working_time: float = 0.0) -> int:
         monitoring_s = self.job_monitoring_interval
@@ -37,6 +51,62 @@ class RenderWorker(Worker):
     @property
     def dequeue_timeout(self) -> int:
         return max(1, min(self.worker_ttl - 15, self.maintenance_interval))
+
+    def maintain_heartbeats(self, job: Job, execution: Execution) -> None:
+        """RQ's heartbeat tick while the work horse runs; after a warm-shutdown request whose grace ran
+        out, also stop the horse (``handle_job_failure`` below then hands the chunk back)."""
+        super().maintain_heartbeats(job, execution)
+        if not self._stop_requested or self._shutdown_requested_date is None:
+            return
+        waited_s = (now() - self._shutdown_requested_date).total_seconds()
+        if waited_s >= self.shutdown_grace_s and self._handing_back_job_id is None:
+            self.log.warning(
+                "Worker %s: job %s still running %.0f s after SIGTERM; handing it back to the queue",
+                self.name,
+                job.id,
+                waited_s,
+            )
+            self._handing_back_job_id = job.id
+            self.kill_horse()
+
+    def handle_job_failure(
+        self,
+        job: Job,
+        queue: Queue,
+        started_job_registry: object = None,
+        exc_string: str = "",
+        execution: Execution | None = None,
+    ) -> None:
+        """A horse this worker stopped for shutdown is no failure: requeue its job instead."""
+        if job.id == self._handing_back_job_id:
+            self._handing_back_job_id = None
+            self.hand_back(job, queue, execution)
+            return
+        super().handle_job_failure(job, queue, started_job_registry, exc_string, execution)
+
+    def request_force_stop(self, signum: int, frame: FrameType | None) -> None:
+        """Cold shutdown (second SIGTERM/SIGINT): RQ kills the horse and exits; hand its job back first."""
+        job, execution = self.get_current_job(), self.execution
+        try:
+            super().request_force_stop(signum, frame)
+        except SystemExit:
+            if job is not None:
+                self.hand_back(job, Queue(job.origin, connection=self.connection), execution)
+            raise
+
+    def hand_back(self, job: Job, queue: Queue, execution: Execution | None) -> None:
+        """Put a job whose horse is dead back at the front of ``queue``, retries untouched.
+
+        Only a job still marked started is requeued: one that finished (or failed) before its horse
+        died must not run again. It is enqueued before its execution leaves the StartedJobRegistry, so a
+        crash in between leaves it queued (the registry's cleanup ignores jobs no longer started)."""
+        if job.get_status(refresh=True) != JobStatus.STARTED:
+            return
+        queue.enqueue_job(job, at_front=True)
+        with self.connection.pipeline() as pipeline:
+            self.cleanup_execution(job, pipeline=pipeline, execution=execution)
+            pipeline.execute()
+        self.log.info("Worker %s: handed job %s back to queue %s", self.name, job.id, queue.name)
 
 
 def worker_name() -> str:
@@ -56,6 +126,7 @@ def build_worker(settings: Settings, client: redis.Redis, name: str | None = Non
         default_result_ttl=settings.result_ttl_s,
     )
     worker.heartbeat_grace_s = settings.worker_heartbeat_grace_s
+    worker.shutdown_grace_s = settings.worker_shutdown_grace_s
     return worker
 
 

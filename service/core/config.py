@@ -62,6 +62,12 @@ class Settings(BaseSettings):
     worker_ttl_s: int = Field(
         420, ge=5, description="Lifetime of an idle worker's registration between beats."
     )
+    worker_shutdown_grace_s: int = Field(
+        40,
+        ge=1,
+        description="On SIGTERM a worker takes no new chunk and lets its current one finish within this "
+        "(s); then it stops the chunk and hands it back to the queue.",
+    )
     rate_limit_per_minute: int = Field(6000, ge=1, description="Requests per token per minute (429 above).")
     idempotency_ttl_s: int = Field(
         24 * 3600, gt=0, description="How long an `idempotency_key` is remembered."
