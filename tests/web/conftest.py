@@ -130,10 +130,21 @@ class Served:
         headers = {"Authorization": f"Bearer {token if token is not None else self.token}"}
         return httpx.get(self.base_url + path, headers=headers, params=params, timeout=60)
 
+    def wait_final(self, job_id: str, timeout_s: float = 120.0) -> dict[str, Any]:
+        """Poll the job until a final status (fails the test after ``timeout_s``, so that a job stuck
+        in a broken worker cannot hang the suite)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            view = self.client.get(job_id)
+            if view["status"] in ("succeeded", "failed", "canceled"):
+                return view
+            time.sleep(0.2)
+        pytest.fail(f"job {job_id} not finished after {timeout_s} s: {self.client.get(job_id)}")
+
     def render(self, scene: dict[str, Any], name: str, **options: Any) -> str:
         """Submit and wait for success; returns the job id."""
         job = self.client.submit(scene, name=name, **options)
-        final = self.client.wait(job["id"], timeout_s=120)
+        final = self.wait_final(job["id"])
         assert final["status"] == "succeeded", final
         return job["id"]
 

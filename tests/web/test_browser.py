@@ -405,7 +405,7 @@ def test_upload_a_json_scene_with_overrides(page: Any, served: Served, tmp_path:
         "() => document.querySelector('#submit-status').textContent.startsWith('submitted')"
     )
     job_id = page.inner_text("#submit-status").split()[-1]
-    final = served.client.wait(job_id, timeout_s=120)
+    final = served.wait_final(job_id)
     assert final["status"] == "succeeded" and final["spp"] == 2 and final["name"] == "uploaded"
     layers = served.get(f"/v1/jobs/{job_id}/layers").json()
     assert (layers["width"], layers["height"]) == (16, 12)  # the overrides were edited into film

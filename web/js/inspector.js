@@ -89,7 +89,7 @@ export class PixelInspector {
     const [width, height, left, bottom, top] = [320, 160, 48, 22, 8];
     svg.replaceChildren();
     const present = ["A", "B"].filter((s) => this.pixels[s]);
-    svg.hidden = !present.length;
+    svg.toggleAttribute("hidden", !present.length); // SVG elements have no .hidden property
     this.root.querySelector("#inspector-hint").hidden = Boolean(present.length);
     if (!present.length) return;
     const all = present.flatMap((s) => this.pixels[s].spectrum.filter((v) => v != null));
