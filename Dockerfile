@@ -13,9 +13,12 @@ RUN apt-get update \
  && apt-get purge -y curl gnupg && apt-get autoremove -y \
  && rm -rf /var/lib/apt/lists/*
 
+# PYTHONPATH=/app: the code runs from /app (not from the installed copy in site-packages) so that the API
+# finds the viewer's static files in /app/web beside its package (service/api/routes/web.py).
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     PIP_NO_CACHE_DIR=1 \
+    PYTHONPATH=/app \
     HGRENDER_DATA_DIR=/data
 
 WORKDIR /app
