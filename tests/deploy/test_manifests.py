@@ -32,6 +32,12 @@ KUBECTL = shutil.which("kubectl")
 BOTO3_ENV_NAMES = frozenset({"AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY", "AWS_SESSION_TOKEN"})
 """Read by boto3 for the S3 store (docs/configuration.md, notes), not by Settings."""
 
+RENDERER_ENV_NAMES = frozenset({"HGRENDER_VARIANT"})
+"""Read by ``worker.mitsuba_setup`` (the renderer's Mitsuba variant), documented in configuration.md."""
+
+RUNTIME_ENV_NAMES = frozenset({"NVIDIA_DRIVER_CAPABILITIES"})
+"""Read by the NVIDIA container runtime on GPU nodes, not by hgrender."""
+
 WORKLOAD_KINDS = ("Deployment", "StatefulSet")
 
 
@@ -75,6 +81,7 @@ VARIANTS = {
     "base": (["base"], []),
     "dev": (["overlays/dev"], []),
     "dev+hpa+s3": (["overlays/dev"], ["components/hpa-fallback", "components/s3-store"]),
+    "base+gpu": (["base"], ["components/gpu-workers"]),
 }
 
 
@@ -174,6 +181,7 @@ def test_every_environment_name_is_a_setting_and_values_validate(
     env = configured_env(docs)
     container_env = {e["name"] for c in hgrender_containers(docs) for e in c.get("env", [])}
     unknown = (set(env) | container_env) - known_env_names() - BOTO3_ENV_NAMES
+    unknown -= RENDERER_ENV_NAMES | RUNTIME_ENV_NAMES
     assert not unknown, f"not settings: {unknown}"
     for container in hgrender_containers(docs):
         refs = [r.get("configMapRef", r.get("secretRef"))["name"] for r in container["envFrom"]]
@@ -188,6 +196,28 @@ def test_every_environment_name_is_a_setting_and_values_validate(
         assert "hgrender-redis" in redis_service
     if "components/s3-store" in rendered["components"]:
         assert settings.store == "s3" and settings.s3_bucket
+
+
+def test_renderer_environment_names_are_read_and_documented() -> None:
+    configuration = (REPO_ROOT / "docs" / "configuration.md").read_text()
+    for name in RENDERER_ENV_NAMES:
+        assert name in (REPO_ROOT / "worker" / "mitsuba_setup.py").read_text()
+        assert f"`{name}`" in configuration
+    for name in BOTO3_ENV_NAMES - {"AWS_SESSION_TOKEN"}:
+        assert f"`{name}`" in configuration
+
+
+def test_gpu_workers_request_a_gpu_and_a_cuda_variant(tmp_path: Path) -> None:
+    from worker.mitsuba_setup import SUPPORTED_VARIANTS
+
+    docs = kustomize(tmp_path, ["base"], ["components/gpu-workers"])
+    worker = by_kind(docs, "Deployment")["hgrender-worker"]
+    (container,) = pod_spec(worker)["containers"]
+    env = {e["name"]: e["value"] for e in container["env"]}
+    assert env["HGRENDER_VARIANT"] in SUPPORTED_VARIANTS and env["HGRENDER_VARIANT"].startswith("cuda_")
+    assert container["resources"]["limits"]["nvidia.com/gpu"] == 1
+    assert container["envFrom"] and container["command"] == ["hgrender", "worker"]  # merged, not replaced
+    assert any(t["key"] == "nvidia.com/gpu" for t in pod_spec(worker)["tolerations"])
 
 
 def test_worker_termination_grace_covers_the_shutdown_grace(
