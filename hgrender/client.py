@@ -115,14 +115,18 @@ class HgrenderClient:
             if include_chunks or not item["name"].startswith(("chunks/", "input/"))
         ]
 
-    def events(self, job_id: str) -> Iterator[tuple[str, dict[str, Any]]]:
-        """(event, data) pairs of the job's SSE stream until it ends."""
-        with self.http.stream("GET", f"/v1/jobs/{job_id}/events", timeout=None) as response:
+    def events(self, job_id: str, deadline: float | None = None) -> Iterator[tuple[str, dict[str, Any]]]:
+        """(event, data) pairs of the job's SSE stream until it ends; TimeoutError once ``deadline``
+        (``time.monotonic()``) has passed (checked at every line, the server pings every few seconds)."""
+        timeout = httpx.Timeout(self.http.timeout.connect, read=60.0)
+        with self.http.stream("GET", f"/v1/jobs/{job_id}/events", timeout=timeout) as response:
             if not response.is_success:
                 response.read()
                 self._check(response)
             event, data_lines = "message", []
             for line in response.iter_lines():
+                if deadline is not None and time.monotonic() > deadline:
+                    raise TimeoutError(f"job_id: {job_id} not finished in time")
                 if line.startswith("event:"):
                     event = line[6:].strip()
                 elif line.startswith("data:"):
@@ -142,13 +146,11 @@ class HgrenderClient:
         breaks."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         try:
-            for event, data in self.events(job_id):
+            for event, data in self.events(job_id, deadline):
                 if on_event is not None:
                     on_event(event, data)
                 if event == "status" and data.get("status") in FINAL_STATUSES:
                     return data
-                if deadline is not None and time.monotonic() > deadline:
-                    raise TimeoutError(f"job_id: {job_id} not finished after {timeout_s} s")
         except httpx.HTTPError:
             pass  # fall back to polling below
         while True:

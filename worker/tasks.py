@@ -159,37 +159,65 @@ def _worker_log(jobs: JobService, job_id: str) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
-def _write_manifest(jobs: JobService, job_id: str, overrides: dict[str, Any]) -> None:
+def _artifact_digests(jobs: JobService, job_id: str) -> list[dict[str, Any]]:
+    """Name, size and SHA-256 of every stored artifact of the job (streamed, never all in memory)."""
+    digests = []
+    for info in jobs.store.list(f"jobs/{job_id}/"):
+        if info.key.endswith("/manifest.json"):
+            continue
+        sha256 = hashlib.sha256()
+        for piece in jobs.store.iter_bytes(info.key):
+            sha256.update(piece)
+        name = info.key.removeprefix(f"jobs/{job_id}/")
+        digests.append({"name": name, "size_bytes": info.size_bytes, "sha256": sha256.hexdigest()})
+    return digests
+
+
+def _write_manifest(
+    jobs: JobService,
+    job_id: str,
+    artifacts: list[dict[str, Any]],
+    overrides: dict[str, Any],
+    **timing_overrides: float,
+) -> None:
     """``manifest.json``: the job's final view and every artifact's size and SHA-256, so results outlive
-    the loss of Redis (``JobService.get`` falls back to it)."""
+    the loss of Redis (``JobService.get`` falls back to it). ``overrides`` replace view fields and
+    ``timing_overrides`` timing fields (the final values, written before the status changes)."""
     view = jobs.get(job_id)
     assert view is not None
     job = view.model_dump(mode="json") | overrides
-    artifacts = [
-        {
-            "name": info.key.removeprefix(f"jobs/{job_id}/"),
-            "size_bytes": info.size_bytes,
-            "sha256": hashlib.sha256(jobs.store.get_bytes(info.key)).hexdigest(),
-        }
-        for info in jobs.store.list(f"jobs/{job_id}/")
-        if not info.key.endswith("/manifest.json")
-    ]
+    job["timings"] |= timing_overrides
     manifest = {"job": job, "artifacts": artifacts, "written_at": time.time()}
     jobs.store.put_bytes(f"jobs/{job_id}/manifest.json", json.dumps(manifest, indent=1).encode())
 
 
 def _fail(jobs: JobService, job_id: str, error: str) -> None:
+    """Record a failed job: its log and manifest first, then the final status."""
     finished_at = time.time()
     jobs.store.put_bytes(
         f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id) + f"error: {error}\n".encode()
     )
-    jobs.transition(job_id, JobStatus.FAILED, error=error, finished_at=repr(finished_at))
-    _write_manifest(jobs, job_id, {})
+    created_at = float(jobs.record(job_id)["created_at"])
+    artifacts = _artifact_digests(jobs, job_id)
+    final = {"status": "failed", "error": error, "eta_s": None}
+    _write_manifest(jobs, job_id, artifacts, final, finished_at=finished_at, total_s=finished_at - created_at)
+    if jobs.transition(job_id, JobStatus.FAILED, error=error, finished_at=repr(finished_at)) is None:
+        _write_manifest(jobs, job_id, artifacts, {})  # canceled meanwhile
 
 
 def merge_task(job_id: str) -> dict[str, Any]:
-    """Merge the chunks of ``job_id`` into the final artifacts, or fail the job if a chunk failed."""
+    """Merge the chunks of ``job_id`` into the final artifacts, or fail the job if a chunk failed. An
+    error in the merge itself is retried like a chunk's; the last attempt fails the job with it."""
     jobs, rq_job = _context()
+    try:
+        return _merge(jobs, rq_job, job_id)
+    except Exception as error:
+        if not rq_job.retries_left and jobs.status(job_id) not in TERMINAL_STATUSES:
+            _fail(jobs, job_id, f"merge: {type(error).__name__}: {error}")
+        raise
+
+
+def _merge(jobs: JobService, rq_job: RQJob, job_id: str) -> dict[str, Any]:
     record = jobs.record(job_id)
     if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
         return {"skipped": record.get("status", "deleted")}
@@ -221,8 +249,11 @@ def merge_task(job_id: str) -> dict[str, Any]:
     jobs.store.put_bytes(f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id))
     jobs.store.put_bytes(scene_key(job_id), json.dumps(scene, indent=1).encode())  # provenance
     finished_at = time.time()
-    # The manifest is in place before the status says succeeded, so a client never misses it.
-    _write_manifest(jobs, job_id, {"status": "succeeded", "progress": 1.0})
-    jobs.transition(job_id, JobStatus.SUCCEEDED, finished_at=repr(finished_at))
-    _write_manifest(jobs, job_id, {})  # final timings (or "canceled", if a cancel won the race)
+    # The manifest is complete before the status says succeeded, so a client never misses or races it.
+    created_at = float(jobs.record(job_id)["created_at"])
+    final = {"status": "succeeded", "progress": 1.0, "eta_s": None}
+    artifacts = _artifact_digests(jobs, job_id)
+    _write_manifest(jobs, job_id, artifacts, final, finished_at=finished_at, total_s=finished_at - created_at)
+    if jobs.transition(job_id, JobStatus.SUCCEEDED, finished_at=repr(finished_at)) is None:
+        _write_manifest(jobs, job_id, artifacts, {})  # a cancel won the race: the manifest says so
     return {"summary": summary, "merge_s": merge_s}

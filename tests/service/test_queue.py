@@ -72,7 +72,7 @@ def test_example_scenes_end_to_end(two_workers: LiveService, tmp_path: Path) -> 
     jobs = {name: client.submit(tiny_scene(name), chunks=2)["id"] for name in names}
     for name, job_id in jobs.items():
         events: list[tuple[str, dict[str, Any]]] = []
-        final = client.wait(job_id, on_event=lambda e, d, events=events: events.append((e, d)), timeout_s=300)
+        final = client.wait(job_id, on_event=lambda e, d, events=events: events.append((e, d)), timeout_s=120)
         assert final["status"] == "succeeded", (name, final.get("error"))
         assert final["progress"] == 1.0 and final["chunks_done"] == 2
         assert events[0][0] == "status" and events[-1][1]["status"] == "succeeded"
@@ -101,7 +101,7 @@ def test_four_chunk_job_equals_local_split_render(two_workers: LiveService, tmp_
     client = two_workers.client()
     scene = tiny_scene(spp=8)
     job_id = client.submit(scene, chunks=4)["id"]
-    final = client.wait(job_id, timeout_s=300)
+    final = client.wait(job_id, timeout_s=120)
     assert final["status"] == "succeeded" and final["chunks_total"] == 4
     assert {c["spp"] for c in final["chunks"]} == {2}
     client.download(job_id, "image.exr", tmp_path / "service.exr")
@@ -110,6 +110,25 @@ def test_four_chunk_job_equals_local_split_render(two_workers: LiveService, tmp_
     local_channels, local_pixels, _ = read_exr(tmp_path / "local" / "image.exr")
     assert service_channels == local_channels
     np.testing.assert_allclose(service_pixels, local_pixels, rtol=1e-5, atol=1e-7)
+
+
+def test_manifest_lists_artifacts_and_outlives_redis(two_workers: LiveService, tmp_path: Path) -> None:
+    import hashlib
+
+    client = two_workers.client()
+    job_id = client.submit(tiny_scene(), chunks=2)["id"]
+    final = client.wait(job_id, timeout_s=120)
+    assert final["status"] == "succeeded"
+    manifest_path = client.download(job_id, "manifest.json", tmp_path / "manifest.json")
+    manifest = json.loads(manifest_path.read_text())
+    assert manifest["job"]["status"] == "succeeded" and manifest["job"]["id"] == job_id
+    image = client.download(job_id, "image.exr", tmp_path / "image.exr")
+    entry = next(a for a in manifest["artifacts"] if a["name"] == "image.exr")
+    assert entry["sha256"] == hashlib.sha256(image.read_bytes()).hexdigest()
+    # Lose the job's Redis state: the API answers from the manifest.
+    two_workers.redis.delete(f"hgrender:job:{job_id}", f"hgrender:job:{job_id}:chunks")
+    recovered = client.get(job_id)
+    assert recovered["status"] == "succeeded" and recovered["timings"] == final["timings"]
 
 
 def test_cancel_stops_a_running_render_within_5_s(two_workers: LiveService) -> None:
@@ -132,7 +151,7 @@ def test_cancel_stops_a_running_render_within_5_s(two_workers: LiveService) -> N
 def _assert_succeeded_exactly_once(
     service: LiveService, client: HgrenderClient, job_id: str
 ) -> dict[str, Any]:
-    final = client.wait(job_id, timeout_s=180)
+    final = client.wait(job_id, timeout_s=120)
     assert final["status"] == "succeeded", final.get("error")
     completions = job_service(service).chunk_completions(job_id)
     assert completions == {**{str(i): 1 for i in range(final["chunks_total"])}, "merge": 1}
@@ -195,7 +214,7 @@ def test_two_workers_drain_20_jobs_without_running_any_twice(live_service: LiveS
     service.start_worker("d2")
     jobs = job_service(service)
     for job_id in job_ids:
-        assert client.wait(job_id, timeout_s=240)["status"] == "succeeded"
+        assert client.wait(job_id, timeout_s=120)["status"] == "succeeded"
         assert jobs.chunk_completions(job_id) == {"0": 1, "merge": 1}
         assert jobs.chunk_fields(job_id)["0.attempts"] == "1"
     workers = {w for job_id in job_ids for w in client.get(job_id)["workers"]}
@@ -218,7 +237,7 @@ def test_multipart_uploads_of_json_and_usd_render(two_workers: LiveService, tmp_
     usd_path = scene_to_usd(validate_scene(scene), tmp_path / "scene.usda")
     for path in (json_path, usd_path):
         job_id = client.submit(path, chunks=1, priority="high")["id"]
-        final = client.wait(job_id, timeout_s=180)
+        final = client.wait(job_id, timeout_s=120)
         assert final["status"] == "succeeded", (path.name, final.get("error"))
         assert final["spp"] == scene["film"]["spp"] and final["priority"] == "high"
     bad = tmp_path / "scene.txt"

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Query, Request, Response, status
-from fastapi.responses import FileResponse, StreamingResponse
+from fastapi.responses import StreamingResponse
 from sse_starlette import EventSourceResponse
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
@@ -178,7 +178,7 @@ async def job_event_stream(
     """`status` events carry the full job view (first one immediately); `progress` events carry
     `progress`, `chunks_done`, `chunks_total`, `eta_s`. The stream ends after a final status."""
     await run_in_threadpool(visible_job, jobs, principal, job_id)
-    return EventSourceResponse(job_events(request, request.app.state.aredis, jobs, job_id), ping=15)
+    return EventSourceResponse(job_events(request, request.app.state.aredis, jobs, job_id), ping=5)
 
 
 @router.get("/{job_id}/artifacts", response_model=ArtifactList, summary="List artifacts", responses=_ERRORS)
@@ -215,9 +215,8 @@ def download_artifact(
     except ValueError:
         raise JobNotFoundError(f"{job_id}/{name}") from None
     media_type = _MEDIA_TYPES.get("." + name.rsplit(".", 1)[-1].lower(), "application/octet-stream")
-    path = store.local_path(key)
-    if path is not None:
-        return FileResponse(path, media_type=media_type, filename=path.name)
+    # Streamed from one open handle: an artifact replaced meanwhile (atomic rename) is sent whole, old
+    # or new, never a mix (a separate stat for Content-Length could disagree with the bytes sent).
     pieces = store.iter_bytes(key)
     first = next(pieces, b"")  # raises ArtifactNotFoundError before the response starts
 
@@ -225,4 +224,5 @@ def download_artifact(
         yield first
         yield from pieces
 
-    return StreamingResponse(body(), media_type=media_type)
+    disposition = f'attachment; filename="{name.rsplit("/", 1)[-1]}"'
+    return StreamingResponse(body(), media_type=media_type, headers={"Content-Disposition": disposition})
