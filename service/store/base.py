@@ -62,11 +62,6 @@ class ArtifactStore(ABC):
     def ping(self) -> None:
         """Raise if the store cannot be reached."""
 
-    def local_path(self, key: str) -> Path | None:
-        """A local file holding the object, if the backend has one (lets the API send it with sendfile);
-        None for remote backends."""
-        return None
-
     def get_bytes(self, key: str) -> bytes:
         return b"".join(self.iter_bytes(key))
 

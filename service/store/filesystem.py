@@ -25,10 +25,6 @@ class FilesystemStore(ArtifactStore):
         """The file that holds ``key``."""
         return self.root / validate_key(key)
 
-    def local_path(self, key: str) -> Path | None:
-        path = self.path_for(key)
-        return path if path.is_file() else None
-
     def _atomic_write(self, key: str, write: object) -> None:
         target = self.path_for(key)
         target.parent.mkdir(parents=True, exist_ok=True)
