@@ -169,7 +169,11 @@ def serve_command(args: argparse.Namespace) -> int:
         finally:
             if scheduler is not None:
                 scheduler.stop_event.set()
-            supervisor.stop()
+            # Room for each worker's graceful shutdown: its grace, the heartbeat tick that hands the chunk
+            # back, and a few seconds to exit (issue 8).
+            supervisor.stop(
+                timeout_s=settings.worker_shutdown_grace_s + settings.worker_monitoring_interval_s + 10
+            )
     finally:
         if redis_server is not None:
             redis_server.stop()
