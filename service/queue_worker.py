@@ -29,6 +29,7 @@ import redis
 from rq import Queue, Worker
 from rq.executions import Execution
 from rq.job import Job, JobStatus
+from rq.registry import StartedJobRegistry
 from rq.utils import now
 
 from service.core.config import QUEUE_NAMES, Settings
@@ -56,6 +57,7 @@ class RenderWorker(Worker):
         """RQ's heartbeat tick while the work horse runs; after a warm-shutdown request whose grace ran
         out, also stop the horse (``handle_job_failure`` below then hands the chunk back)."""
         super().maintain_heartbeats(job, execution)
+        # RQ records the warm-shutdown request in these two attributes (request_stop / _shutdown).
         if not self._stop_requested or self._shutdown_requested_date is None:
             return
         waited_s = (now() - self._shutdown_requested_date).total_seconds()
@@ -73,7 +75,7 @@ class RenderWorker(Worker):
         self,
         job: Job,
         queue: Queue,
-        started_job_registry: object = None,
+        started_job_registry: StartedJobRegistry | None = None,
         exc_string: str = "",
         execution: Execution | None = None,
     ) -> None:
