@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -132,6 +133,10 @@ class WorkerSupervisor:
                 process.kill()
 
 
+def _exit_on_signal(signum: int, _frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
 def serve_command(args: argparse.Namespace) -> int:
     import redis
     import uvicorn
@@ -162,6 +167,9 @@ def serve_command(args: argparse.Namespace) -> int:
         supervisor.start()
         # The regression scheduler (issue 7), leader-elected: several `serve` processes fire each run once.
         scheduler = start_scheduler_thread(settings)[0] if settings.regression_scheduler else None
+        # uvicorn shuts down gracefully on SIGTERM, then re-raises the signal; with this handler that
+        # becomes SystemExit here, so the workers and the private Redis below are stopped too.
+        signal.signal(signal.SIGTERM, _exit_on_signal)
         try:
             uvicorn.run(
                 create_app(settings), host=args.host, port=args.port, log_level="warning", access_log=False

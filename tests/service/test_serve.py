@@ -9,7 +9,6 @@ import signal
 import stat
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import httpx
@@ -64,6 +63,7 @@ def test_serve_restart_keeps_queued_jobs_and_cli_works(
     port = free_loopback_port()
     first = start_serve(data_dir, port, workers=0)  # no workers: jobs stay queued
     try:
+        assert redis_servers_in(data_dir / "redis"), "serve started no private Redis"
         token_file = data_dir / "admin.token"
         assert stat.S_IMODE(token_file.stat().st_mode) == 0o600
         token = token_file.read_text().strip()
@@ -105,17 +105,21 @@ def test_serve_restart_keeps_queued_jobs_and_cli_works(
         assert sorted(EXAMPLES_DIR.glob("*.json"))
     finally:
         stop_serve(second)
-    # Both serve runs stopped their private Redis.
-    deadline = time.monotonic() + 10
-    while (
-        time.monotonic() < deadline
-        and "redis-server"
-        in subprocess.run(["pgrep", "-af", str(data_dir / "redis")], capture_output=True, text=True).stdout
-    ):
-        time.sleep(0.2)
-    assert (
-        "redis-server"
-        not in subprocess.run(
-            ["pgrep", "-af", str(data_dir / "redis")], capture_output=True, text=True
-        ).stdout
-    )
+    # Both serve runs stopped their private Redis (a redis-server's working directory is its data dir).
+    assert wait_for(lambda: not redis_servers_in(data_dir / "redis"), 10, "the private Redis to stop")
+
+
+def redis_servers_in(directory: Path) -> list[int]:
+    """PIDs of redis-server processes working in ``directory``."""
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if (
+                proc.name.isdigit()
+                and (proc / "comm").read_text().strip() == "redis-server"
+                and Path(os.readlink(proc / "cwd")) == directory.resolve()
+            ):
+                pids.append(int(proc.name))
+        except OSError:  # the process ended meanwhile
+            continue
+    return pids
