@@ -1,15 +1,17 @@
 """Kubernetes manifests (deploy/), compose and Dockerfile agree with the code (issue 8).
 
-The kustomize base, the dev overlay and both components are rendered with ``kubectl kustomize`` (skipped
-where kubectl is not installed; the raw YAML is parsed with PyYAML regardless) and checked: required
-fields, one hgrender image, probes on /readyz and /healthz, resources, non-root security contexts, the
-worker's termination grace against its shutdown grace, KEDA triggers on RQ's queue lists, selectors that
-select something, and every environment variable name known to ``Settings`` / ``SceneLimits``.
+The kustomize base, the dev overlay and the components are rendered with ``kubectl kustomize`` (skipped
+where kubectl is not installed; the raw YAML is parsed with PyYAML regardless), validated against the
+Kubernetes OpenAPI schemas (kubernetes-validate) and checked: required fields, one hgrender image, probes
+on /readyz and /healthz, resources, non-root security contexts, the worker's termination grace against
+its shutdown grace, KEDA triggers on RQ's queue lists, selectors that select something, and every
+environment variable name known to ``Settings`` / ``SceneLimits``.
 """
 
 from __future__ import annotations
 
 import base64
+import json
 import os
 import re
 import shutil
@@ -128,6 +130,22 @@ def configured_env(docs: list[dict[str, Any]]) -> dict[str, str]:
     (secret,) = [s for n, s in secrets.items() if n.startswith("hgrender-secrets")]
     decoded = {k: base64.b64decode(v).decode() for k, v in secret.get("data", {}).items()}
     return config_map["data"] | decoded
+
+
+def test_rendered_resources_validate_against_the_kubernetes_schemas(rendered: dict[str, Any]) -> None:
+    """Strict OpenAPI-schema validation (kubernetes-validate, offline; unknown fields are errors) of
+    every built-in kind; KEDA's ScaledObject has no bundled schema and is checked field by field below."""
+    kubernetes_validate = pytest.importorskip("kubernetes_validate")
+    version = kubernetes_validate.latest_version()
+    for doc in rendered["docs"]:
+        if doc["kind"] == "ScaledObject":
+            continue
+        kubernetes_validate.validate(doc, version, strict=True)
+    # The check bites: a misspelt field in a copy of the worker Deployment is rejected.
+    worker = json.loads(json.dumps(by_kind(rendered["docs"], "Deployment")["hgrender-worker"]))
+    pod_spec(worker)["terminationGracePeriod"] = 60
+    with pytest.raises(kubernetes_validate.ValidationError):
+        kubernetes_validate.validate(worker, version, strict=True)
 
 
 def test_raw_yaml_parses_and_every_resource_is_named() -> None:
