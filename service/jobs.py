@@ -342,8 +342,7 @@ class JobService:
         if status is None:
             total = int(self.client.zcard(index))
             ids = [i.decode() for i in self.client.zrevrange(index, offset, offset + limit - 1)]
-            views = [v for v in (self.get(i) for i in ids) if v is not None]
-            return views, total
+            return self._views(ids), total
         # Filtering by status scans the owner's index; statuses live in the records.
         ids = [i.decode() for i in self.client.zrevrange(index, 0, -1)]
         with self.client.pipeline(transaction=False) as pipe:
@@ -351,8 +350,20 @@ class JobService:
                 pipe.hget(_JOB_KEY.format(job_id), "status")
             statuses = pipe.execute()
         matching = [i for i, s in zip(ids, statuses, strict=True) if s is not None and s.decode() == status]
-        views = [v for v in (self.get(i) for i in matching[offset : offset + limit]) if v is not None]
-        return views, len(matching)
+        return self._views(matching[offset : offset + limit]), len(matching)
+
+    def _views(self, job_ids: list[str]) -> list[JobView]:
+        """Views of several jobs in one round trip (jobs deleted meanwhile are left out)."""
+        with self.client.pipeline(transaction=False) as pipe:
+            for job_id in job_ids:
+                pipe.hgetall(_JOB_KEY.format(job_id))
+                pipe.hgetall(_CHUNKS_KEY.format(job_id))
+            replies = pipe.execute()
+        return [
+            build_view(_decode(record), _decode(chunk_fields))
+            for record, chunk_fields in zip(replies[::2], replies[1::2], strict=True)
+            if record
+        ]
 
     def counts_by_state(self) -> dict[str, int]:
         counts = {k: int(v) for k, v in _decode(self.client.hgetall(_BY_STATE_KEY)).items()}
