@@ -10,6 +10,7 @@ it writes a first admin token to ``<data dir>/admin.token``. The client commands
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
 import signal
@@ -170,11 +171,15 @@ def serve_command(args: argparse.Namespace) -> int:
         # uvicorn shuts down gracefully on SIGTERM, then re-raises the signal; with this handler that
         # becomes SystemExit here, so the workers and the private Redis below are stopped too.
         signal.signal(signal.SIGTERM, _exit_on_signal)
+        app = create_app(settings)
+        # What exists now lives as long as the process: freeze it out of the cyclic collector, whose full
+        # passes over these ~10^5 startup objects would otherwise stall requests for tens of ms (p99).
+        gc.collect()
+        gc.freeze()
         try:
-            uvicorn.run(
-                create_app(settings), host=args.host, port=args.port, log_level="warning", access_log=False
-            )
+            uvicorn.run(app, host=args.host, port=args.port, log_level="warning", access_log=False)
         finally:
+            gc.unfreeze()  # let interpreter shutdown collect them (native bindings check for leaks)
             if scheduler is not None:
                 scheduler.stop_event.set()
             # Room for each worker's graceful shutdown: its grace, the heartbeat tick that hands the chunk
