@@ -3,6 +3,7 @@
 Dr.Jit's LLVM backend needs a recent libLLVM (Debian's ``libllvm19``; LLVM 14/15 crash), so the path is
 set through ``DRJIT_LIBLLVM_PATH`` before Mitsuba is imported. The variant is ``cuda_ad_spectral`` where
 an NVIDIA GPU is usable, else ``llvm_ad_spectral``; ``HGRENDER_VARIANT`` or an explicit argument wins.
+``HGRENDER_RENDER_THREADS`` (the setting ``render_threads``) sizes Dr.Jit's CPU thread pool.
 """
 
 from __future__ import annotations
@@ -52,6 +53,12 @@ def load_mitsuba(variant: str | None = None) -> ModuleType:
             os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
     import mitsuba as mi
 
+    threads = os.environ.get("HGRENDER_RENDER_THREADS")
+    if threads:
+        # Workers started side by side share the cores (`hgrender serve` sets cores // workers).
+        import drjit as dr
+
+        dr.set_thread_count(int(threads))
     requested = variant or os.environ.get("HGRENDER_VARIANT", "auto")
     if requested == "auto":
         requested = "cuda_ad_spectral" if _cuda_available(mi) else "llvm_ad_spectral"

@@ -164,6 +164,7 @@ def serve_command(args: argparse.Namespace) -> int:
             client.close()
             print(f"admin token: {data_dir / 'admin.token'}", file=sys.stderr)
         env = {**os.environ, **settings.to_env()}
+        env["HGRENDER_RENDER_THREADS"] = str(settings.render_threads_per_worker)
         supervisor = WorkerSupervisor(settings.worker_count, env)
         supervisor.start()
         # The regression scheduler (issue 7), leader-elected: several `serve` processes fire each run once.

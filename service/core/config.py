@@ -50,6 +50,12 @@ class Settings(BaseSettings):
     workers: int | None = Field(
         None, ge=0, description="Queue workers started by `hgrender serve`; default max(1, cores // 2)."
     )
+    render_threads: int | None = Field(
+        None,
+        ge=1,
+        description="Dr.Jit CPU threads per rendering process; `hgrender serve` default: cores // workers "
+        "(workers share the cores instead of oversubscribing them), elsewhere all cores.",
+    )
     worker_monitoring_interval_s: int = Field(
         10, ge=1, description="How often a worker heartbeats while its work horse renders."
     )
@@ -125,6 +131,13 @@ class Settings(BaseSettings):
     @property
     def auth_enabled(self) -> bool:
         return self.auth == "on"
+
+    @property
+    def render_threads_per_worker(self) -> int:
+        """Dr.Jit threads for each of ``worker_count`` workers started by ``hgrender serve``."""
+        if self.render_threads is not None:
+            return self.render_threads
+        return max(1, (os.cpu_count() or 1) // max(1, self.worker_count))
 
     @property
     def worker_count(self) -> int:
