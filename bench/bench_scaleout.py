@@ -1,11 +1,11 @@
 """Throughput of chunked renders through the service with 1, 2 and 4 worker processes (issue 8).
 
-For each worker count N a fresh ``hgrender serve --workers N`` (private Redis, temporary data dir, auth
-off, one Dr.Jit thread per worker) renders the same batch of chunked jobs; the clock runs from the first
-submission to the last job's ``succeeded``. Reported: jobs/hour and the scaling efficiency
-E_N = (throughput_N / throughput_1) / N, whose goal is ≥ 0.9 while N ≤ cores. A warm-up job per server fills Dr.Jit's kernel cache first, so
-compilation is excluded. Workers on loopback only (the namespaced multi-host set-up is exercised by
-tests/deploy/test_multihost.py, not timed here).
+For each worker count N a fresh ``hgrender serve --workers N`` (private Redis, temporary data dir,
+auth off, one Dr.Jit thread per worker) renders the same batch of chunked jobs; the clock runs from
+the first submission to the last job's ``succeeded``. Reported: jobs/hour and the scaling efficiency
+E_N = (throughput_N / throughput_1) / N, whose goal is ≥ 0.9 while N ≤ cores. A warm-up job per
+server fills Dr.Jit's kernel cache first, so compilation is excluded. Workers run on loopback only
+(the namespaced multi-host set-up is exercised by tests/deploy/test_multihost.py, not timed here).
 
 Run: ``.venv/bin/python -m bench.bench_scaleout [--jobs 8] [--workers 1,2,4]``.
 """
