@@ -240,3 +240,17 @@ def test_openapi_example_scene_is_valid() -> None:
     validate_scene(EXAMPLE_SCENE)
     example = JobCreate.model_json_schema()["examples"][0]
     assert JobCreate.model_validate(example).scene == EXAMPLE_SCENE
+
+
+def test_auth_off_makes_every_caller_the_local_developer(live_service: LiveService) -> None:
+    from fastapi.testclient import TestClient
+
+    from service.main import create_app
+
+    settings = live_service.settings.model_copy(update={"auth": "off"})
+    with TestClient(create_app(settings)) as client:
+        response = client.post("/v1/jobs", json={"scene": tiny_scene(), "chunks": 1})
+        assert response.status_code == 202
+        job = client.get(f"/v1/jobs/{response.json()['id']}").json()
+        assert job["owner"] == "local"
+        assert client.get("/v1/tokens").status_code == 200  # every scope, admin included
