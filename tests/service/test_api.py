@@ -4,7 +4,9 @@ tokens, health, metrics, schema and coherence endpoints — over HTTP against a 
 
 from __future__ import annotations
 
+import json
 import math
+import re
 import subprocess
 import sys
 import time
@@ -211,6 +213,10 @@ def test_health_readiness_metrics_schema(live_service: LiveService) -> None:
     assert "properties" in schema or "$defs" in schema
     spec = http_get(live_service, "/openapi.json").json()
     assert {"/v1/jobs", "/v1/jobs/{job_id}/events", "/v1/coherence", "/metrics"} <= set(spec["paths"])
+    references = set(re.findall(r'"\$ref": "#/components/schemas/([^"]+)"', json.dumps(spec)))
+    assert references <= set(spec["components"]["schemas"]), references - set(spec["components"]["schemas"])
+    body = spec["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
+    assert body["properties"]["scene"]["type"] == "object" and body["examples"]
 
 
 def test_metrics_jobs_by_state_match_listing(live_service: LiveService) -> None:

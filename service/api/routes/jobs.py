@@ -92,7 +92,9 @@ async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str,
         "requestBody": {
             "required": True,
             "content": {
-                "application/json": {"schema": {"$ref": "#/components/schemas/JobCreate"}},
+                # Inlined: the route reads the body itself (JSON or multipart), so FastAPI registers no
+                # component for JobCreate. Its schema has no nested definitions to resolve.
+                "application/json": {"schema": JobCreate.model_json_schema()},
                 "multipart/form-data": {"schema": _MULTIPART_SCHEMA},
             },
         }
