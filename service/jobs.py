@@ -80,6 +80,18 @@ end
 return false
 """
 
+# KEYS: job hash. ARGV: progress, channel, payload. Publishes the payload only when the progress exceeds
+# every progress published before for this job: chunks on different workers aggregate concurrently, and a
+# retried chunk restarts at 0, but a job's published progress never goes backwards.
+_PUBLISH_PROGRESS_LUA = """
+local last = tonumber(redis.call('HGET', KEYS[1], 'progress_published') or '-1')
+local progress = tonumber(ARGV[1])
+if progress <= last then return 0 end
+redis.call('HSET', KEYS[1], 'progress_published', ARGV[1])
+redis.call('PUBLISH', ARGV[2], ARGV[3])
+return 1
+"""
+
 ALLOWED_FROM: dict[JobStatus, tuple[JobStatus, ...]] = {
     JobStatus.RUNNING: (JobStatus.QUEUED,),
     JobStatus.SUCCEEDED: (JobStatus.QUEUED, JobStatus.RUNNING),
@@ -144,6 +156,7 @@ class JobService:
         self.store = store
         self.settings = settings
         self._transition_script = client.register_script(_TRANSITION_LUA)
+        self._publish_progress_script = client.register_script(_PUBLISH_PROGRESS_LUA)
         # Queue objects cache the server version RQ asks for on every enqueue.
         self._queues = {name: Queue(name, connection=client) for name in PRIORITY_QUEUES.values()}
 
@@ -477,15 +490,16 @@ class JobService:
             _, record, chunk_fields = pipe.execute()
         if record:
             view = build_view(_decode(record), _decode(chunk_fields))
-            self.publish(
-                job_id,
-                {
-                    "type": "progress",
-                    "progress": view.progress,
-                    "chunks_done": view.chunks_done,
-                    "chunks_total": view.chunks_total,
-                    "eta_s": view.eta_s,
-                },
+            event = {
+                "type": "progress",
+                "progress": view.progress,
+                "chunks_done": view.chunks_done,
+                "chunks_total": view.chunks_total,
+                "eta_s": view.eta_s,
+            }
+            self._publish_progress_script(
+                keys=[_JOB_KEY.format(job_id)],
+                args=[repr(view.progress), EVENTS_CHANNEL.format(job_id), json.dumps(event)],
             )
 
     def chunk_finished(self, job_id: str, index: int | str, samples: int, seconds: float) -> None:
