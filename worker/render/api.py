@@ -26,7 +26,8 @@ from worker.render.output import (
     write_images,
     write_summary,
 )
-from worker.render.renderer import PixelSums, Renderer
+from worker.render.pixel_sums import PixelSums
+from worker.render.renderer import Renderer
 from worker.render.scene_compiler import SceneCompiler
 
 ProgressCallback = Callable[[float], None]

@@ -22,7 +22,7 @@ import numpy as np
 from hgrender.imaging import auto_exposure_ev, display_rgb8
 from worker.optics import spectra
 from worker.optics.coherence import diagnostics_components
-from worker.render.renderer import PixelSums
+from worker.render.pixel_sums import PixelSums
 from worker.render.spectral import LAMBDA_REFERENCE_NM, BandLayout
 
 K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)

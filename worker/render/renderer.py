@@ -12,7 +12,6 @@ Kernel compilation: Dr.Jit caches compiled kernels by the hash of their IR (in m
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import drjit as dr
@@ -22,69 +21,15 @@ from worker.mitsuba_setup import load_mitsuba
 from worker.optics.sources import source_coefficients
 from worker.render.emitters import EmitterKind
 from worker.render.integrator import HGPathIntegrator, RenderContext, register
+from worker.render.pixel_sums import SUM_KEYS, PixelSums
 from worker.render.scene_compiler import CompiledScene
 
 MAX_WAVEFRONT = 1 << 20  # samples per pass: ~40 float32 outputs each stay in memory until reduced
-SUM_KEYS = (
-    "diag_w",
-    "diag_mxx",
-    "diag_mxy",
-    "diag_myy",
-    "diag_r",
-    "diag_c2",
-    "diag_s2",
-    "depth",
-    "normal_x",
-    "normal_y",
-    "normal_z",
-    "albedo_x",
-    "albedo_y",
-    "albedo_z",
-    "luminance",
-    "luminance_sq",
-)
 
 
 def pass_seed(chunk_seed: int, pass_index: int) -> int:
     """A 32-bit seed per pass, distinct across chunks and passes (deterministic)."""
     return (chunk_seed * 0x9E3779B1 + pass_index * 0x85EBCA77 + 0x165667B1) & 0xFFFFFFFF
-
-
-@dataclass
-class PixelSums:
-    """Per-pixel sums over ``sample_count`` samples per pixel (float64, shape (H, W[, B]))."""
-
-    sample_count: int
-    bands: np.ndarray
-    bands_sq: np.ndarray
-    values: dict[str, np.ndarray]
-
-    def add(self, other: PixelSums) -> PixelSums:
-        return PixelSums(
-            self.sample_count + other.sample_count,
-            self.bands + other.bands,
-            self.bands_sq + other.bands_sq,
-            {key: self.values[key] + other.values[key] for key in self.values},
-        )
-
-    def to_arrays(self) -> dict[str, np.ndarray]:
-        """Arrays for a chunk partial. float32 halves the file and keeps 7 significant digits of each sum,
-        far below the Monte Carlo error of any pixel; merges add them in float64."""
-        return {
-            "sample_count": np.array(self.sample_count),
-            "bands": self.bands.astype(np.float32),
-            "bands_sq": self.bands_sq.astype(np.float32),
-            **{f"v_{key}": value.astype(np.float32) for key, value in self.values.items()},
-        }
-
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> PixelSums:
-        return cls(
-            int(arrays["sample_count"]),
-            arrays["bands"].astype(np.float64),
-            arrays["bands_sq"].astype(np.float64),
-            {key: arrays[f"v_{key}"].astype(np.float64) for key in SUM_KEYS},
-        )
 
 
 class Renderer:
