@@ -25,7 +25,7 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -106,6 +106,7 @@ class DecodedImage:
     channels: dict[str, np.ndarray]
     band_names: list[str] = field(default_factory=list)
     wavelengths_nm: list[float] = field(default_factory=list)
+    partial: bool = False  # merged from the chunks finished so far (the job is still running)
     _layers: list[LayerInfo] | None = None
 
     @property
@@ -172,14 +173,42 @@ def decode_exr(path: Path) -> DecodedImage:
         raise OSError(f"cannot read {path}: {oiio.geterror()}")
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
     channels = {name: np.ascontiguousarray(pixels[..., i]) for i, name in enumerate(spec.channelnames)}
+    return _decoded(spec.width, spec.height, channels)
+
+
+def _decoded(width: int, height: int, channels: dict[str, np.ndarray], partial: bool = False) -> DecodedImage:
     band_names = sorted((n for n in channels if n.startswith(BAND_PREFIX)), key=band_wavelength_nm)
     return DecodedImage(
-        width=spec.width,
-        height=spec.height,
+        width=width,
+        height=height,
         channels=channels,
         band_names=band_names,
         wavelengths_nm=[band_wavelength_nm(n) for n in band_names],
+        partial=partial,
     )
+
+
+def merge_partials(paths: list[Path], film: dict[str, Any]) -> DecodedImage:
+    """The image of the chunk partials finished so far (a running job's preview): the renderer's own
+    merge of per-pixel sums (``worker.render.output``, NumPy only), without writing anything."""
+    from worker.render.output import image_channels, images_from_sums
+    from worker.render.pixel_sums import PixelSums
+    from worker.render.spectral import BandLayout
+
+    total: PixelSums | None = None
+    for path in paths:
+        with np.load(path) as data:
+            sums = PixelSums.from_arrays({key: data[key] for key in data.files})
+        total = sums if total is None else total.add(sums)
+    if total is None:
+        raise ArtifactNotFoundError("chunks")
+    bands = BandLayout(film["wavelength_min_nm"], film["wavelength_max_nm"], film["bands"])
+    images = images_from_sums(total, bands)
+    channels = {
+        name: np.ascontiguousarray(values, dtype=np.float32) for name, values in image_channels(images, bands)
+    }
+    height, width = images["depth"].shape
+    return _decoded(width, height, channels, partial=True)
 
 
 class DecodedImageCache:
@@ -212,6 +241,33 @@ class DecodedImageCache:
             path = Path(directory) / IMAGE_ARTIFACT
             self.store.get_file(key, path)
             image = decode_exr(path)
+        with self._lock:
+            self._images[cache_key] = image
+            self._images.move_to_end(cache_key)
+            while len(self._images) > self.max_images:
+                self._images.popitem(last=False)
+        return image
+
+    def get_partial(self, job_id: str, film: dict[str, Any]) -> DecodedImage:
+        """A running job's preview from its finished chunk partials; ArtifactNotFoundError when none."""
+        prefix = f"jobs/{job_id}/chunks/"
+        listed = sorted(
+            (info for info in self.store.list(prefix) if info.key.endswith(".npz")), key=lambda i: i.key
+        )
+        if not listed:
+            raise ArtifactNotFoundError("chunks")
+        cache_key = (job_id, hash(tuple((info.key, info.size_bytes) for info in listed)))
+        with self._lock:
+            if cache_key in self._images:
+                self._images.move_to_end(cache_key)
+                return self._images[cache_key]
+        with tempfile.TemporaryDirectory(prefix="hgrender-viewer-") as directory:
+            paths = []
+            for index, info in enumerate(listed):
+                path = Path(directory) / f"{index}.npz"
+                self.store.get_file(info.key, path)
+                paths.append(path)
+            image = merge_partials(paths, film)
         with self._lock:
             self._images[cache_key] = image
             self._images.move_to_end(cache_key)

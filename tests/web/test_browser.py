@@ -255,18 +255,31 @@ def test_running_job_progress_bar_advances(page: Any, served: Served) -> None:
     values: list[float] = []
     deadline = time.monotonic() + 120
     running_seen = False
+    preview_seen = False
     while time.monotonic() < deadline:
         values.append(float(page.evaluate(f"() => document.querySelector('{row} progress').value")))
         status = page.get_attribute(row, "data-status")
         if status == "running" and not running_seen:
             running_seen = True
-            # While running the image endpoints answer 409 (no image yet).
-            assert served.get(f"/v1/jobs/{job_id}/layers").status_code == 409
             screenshot(page, "jobs_running")
+        if status == "running" and not preview_seen:
+            # Before any chunk finishes the image endpoints answer 409; afterwards they serve a preview
+            # merged from the finished chunks (flagged partial).
+            view = served.get(f"/v1/jobs/{job_id}").json()
+            layers = served.get(f"/v1/jobs/{job_id}/layers")
+            if view["status"] == "running" and view["chunks_done"] == 0 and layers.status_code == 409:
+                pass
+            elif layers.status_code == 200 and view["status"] == "running":
+                catalogue = layers.json()
+                assert catalogue["partial"] is True and (catalogue["width"], catalogue["height"]) == (48, 48)
+                assert served.get(f"/v1/jobs/{job_id}/display.png").status_code == 200
+                preview_seen = True
         if status in ("succeeded", "failed", "canceled"):
             break
         page.wait_for_timeout(50)
     assert page.get_attribute(row, "data-status") == "succeeded"
+    assert preview_seen  # 4 chunks of ≈0.3 s each, polled every 50 ms
+    assert served.get(f"/v1/jobs/{job_id}/layers").json()["partial"] is False
     values.append(float(page.evaluate(f"() => document.querySelector('{row} progress').value")))
     intermediate = sorted({v for v in values if 0.0 < v < 1.0})
     # 4 chunks on one worker: at least the 25 %, 50 %, 75 % steps are shown before 100 %.

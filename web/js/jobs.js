@@ -153,7 +153,8 @@ export class JobsPanel {
     tr.querySelector(".job-duration").textContent = duration == null ? "—" : `${duration.toFixed(1)} s`;
     const rate = samplesPerSecond(job);
     tr.querySelector(".job-rate").textContent = rate == null ? "—" : `${formatValue(rate)} samples/s`;
-    tr.querySelector(".job-view").disabled = job.status !== "succeeded";
+    // A running job can be previewed once a chunk has finished (the API merges the finished chunks).
+    tr.querySelector(".job-view").disabled = !(job.status === "succeeded" || (job.status === "running" && job.chunks_done > 0));
     tr.querySelector(".job-cancel").disabled = FINAL.has(job.status);
   }
 

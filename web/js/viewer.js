@@ -197,7 +197,8 @@ export class ImageViewer {
     for (const [name, label] of DIAGNOSTIC_LAYERS) if (this.info.has(name)) mode.append(new Option(label, name));
     this.root.querySelector("#viewer-title").textContent = `Job ${jobId}`;
     this.root.querySelector("#viewer-hint").hidden = true;
-    this.root.querySelector("#viewer-size").textContent = `${width}×${height} px, ${this.bandNames.length} bands`;
+    const partial = this.catalogue.partial ? " — preview of the chunks finished so far (job running; reopen to refresh)" : "";
+    this.root.querySelector("#viewer-size").textContent = `${width}×${height} px, ${this.bandNames.length} bands${partial}`;
     await this.layer("rgb");
     this.setAutoExposure();
     this.fit();

@@ -132,17 +132,21 @@ def _write_exr(path: Path, channels: list[tuple[str, np.ndarray]], attributes: d
 SPECTRAL_ATTRIBUTES = {"spectralLayoutVersion": "1.0", "emissiveUnits": "W.m^-2.sr^-1"}
 
 
-def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path) -> list[str]:
-    """image.exr, variance.exr and preview.png into ``out_dir``; returns the file names."""
-    names = bands.channel_names()
+def image_channels(images: dict[str, np.ndarray], bands: BandLayout) -> list[tuple[str, np.ndarray]]:
+    """The (name, (H, W) array) channels of ``image.exr`` in file order."""
     channels = [("R", images["rgb"][..., 0]), ("G", images["rgb"][..., 1]), ("B", images["rgb"][..., 2])]
-    channels += [(name, images["bands"][..., b]) for b, name in enumerate(names)]
+    channels += [(name, images["bands"][..., b]) for b, name in enumerate(bands.channel_names())]
     channels += [(f"coherence.{key}", images[f"coherence.{key}"]) for key in (*COHERENCE_CHANNELS, "weight")]
     channels += [("depth", images["depth"])]
     channels += [(f"normal.{axis}", images["normal"][..., i]) for i, axis in enumerate("XYZ")]
     channels += [(f"albedo.{c}", images["albedo"][..., i]) for i, c in enumerate("RGB")]
-    _write_exr(out_dir / "image.exr", channels, SPECTRAL_ATTRIBUTES)
-    variance = [(name, images["band_variance"][..., b]) for b, name in enumerate(names)]
+    return channels
+
+
+def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path) -> list[str]:
+    """image.exr, variance.exr and preview.png into ``out_dir``; returns the file names."""
+    _write_exr(out_dir / "image.exr", image_channels(images, bands), SPECTRAL_ATTRIBUTES)
+    variance = [(name, images["band_variance"][..., b]) for b, name in enumerate(bands.channel_names())]
     variance.append(("Y", images["luminance_variance"]))
     _write_exr(out_dir / "variance.exr", variance, SPECTRAL_ATTRIBUTES)
     atomic_write_bytes(out_dir / "preview.png", preview_png(images["rgb"]))

@@ -68,6 +68,7 @@ class LayerCatalogue(BaseModel):
     height: int
     wavelengths_nm: list[float]
     layers: list[LayerView]
+    partial: bool = Field(False, description="True while the job runs: merged from its finished chunks.")
 
 
 class PixelView(BaseModel):
@@ -118,12 +119,19 @@ def install(app: FastAPI, max_images: int = 8) -> None:
 
 async def _image(request: Request, jobs: JobsDep, principal: Reader, job_id: str) -> DecodedImage:
     view = await run_in_threadpool(visible_job, jobs, principal, job_id)
-    if view.status != JobStatus.SUCCEEDED:
-        raise JobConflictError(
-            f"job_id: job {job_id} is {view.status.value}; its image exists once it succeeded"
-        )
     cache: DecodedImageCache = request.app.state.viewer_images
-    return await run_in_threadpool(cache.get, job_id)
+    if view.status == JobStatus.SUCCEEDED:
+        return await run_in_threadpool(cache.get, job_id)
+    if view.status == JobStatus.RUNNING:
+        # A running job shows the chunks finished so far (issue 6: "where partial results exist").
+        film = (await run_in_threadpool(jobs.scene, job_id))["film"]  # validated: every field present
+        try:
+            return await run_in_threadpool(cache.get_partial, job_id, film)
+        except ArtifactNotFoundError:
+            pass
+    raise JobConflictError(
+        f"job_id: job {job_id} is {view.status.value}; its image exists once a chunk has finished"
+    )
 
 
 def _layer_view(info: LayerInfo) -> LayerView:
@@ -141,6 +149,7 @@ async def list_layers(request: Request, job_id: JobId, jobs: JobsDep, principal:
     layers = await run_in_threadpool(image.layers)
     return LayerCatalogue(
         job_id=job_id,
+        partial=image.partial,
         width=image.width,
         height=image.height,
         wavelengths_nm=image.wavelengths_nm,
