@@ -316,15 +316,15 @@ class _EmitterBase(StrictModel):
         return self
 
 
-class SphereEmitter(_EmitterBase):
-    """A sphere emitting outwards from every surface point (area 4πR²)."""
+class SphereGeometry(StrictModel):
+    """A sphere (area 4πR²)."""
 
     type: Literal["sphere"]
     center_m: Vec3
     radius_m: PositiveFloat
 
 
-class CylinderEmitter(_EmitterBase):
+class CylinderGeometry(StrictModel):
     """An open cylinder (side surface only, no caps; area 2πRL) with axis from ``p0_m`` to ``p1_m``."""
 
     type: Literal["cylinder"]
@@ -333,16 +333,14 @@ class CylinderEmitter(_EmitterBase):
     radius_m: PositiveFloat
 
     @model_validator(mode="after")
-    def _axis(self) -> CylinderEmitter:
+    def _axis(self) -> CylinderGeometry:
         _check_direction([b - a for a, b in zip(self.p0_m, self.p1_m, strict=True)], "p1_m - p0_m")
         return self
 
 
-class RectangleEmitter(_EmitterBase):
-    """A one-sided rectangle emitting on the ``normal`` side.
-
-    ``height_m`` runs along ``up`` (projected onto the plane), ``width_m`` along ``up × normal``.
-    """
+class RectangleGeometry(StrictModel):
+    """A rectangle: ``height_m`` runs along ``up`` (projected onto the plane), ``width_m`` along
+    ``up × normal``."""
 
     type: Literal["rectangle"]
     center_m: Vec3
@@ -352,13 +350,13 @@ class RectangleEmitter(_EmitterBase):
     height_m: PositiveFloat
 
     @model_validator(mode="after")
-    def _frame(self) -> RectangleEmitter:
+    def _frame(self) -> RectangleGeometry:
         _check_rectangle_frame(self.normal, self.up)
         return self
 
 
-class DiskEmitter(_EmitterBase):
-    """A one-sided disk emitting on the ``normal`` side."""
+class DiskGeometry(StrictModel):
+    """A disk with unit ``normal``."""
 
     type: Literal["disk"]
     center_m: Vec3
@@ -366,9 +364,25 @@ class DiskEmitter(_EmitterBase):
     radius_m: PositiveFloat
 
     @model_validator(mode="after")
-    def _frame(self) -> DiskEmitter:
+    def _frame(self) -> DiskGeometry:
         _check_direction(self.normal, "normal")
         return self
+
+
+class SphereEmitter(_EmitterBase, SphereGeometry):
+    """A sphere emitting outwards from every surface point (area 4πR²)."""
+
+
+class CylinderEmitter(_EmitterBase, CylinderGeometry):
+    """An open cylinder (side surface only, no caps; area 2πRL) emitting outwards."""
+
+
+class RectangleEmitter(_EmitterBase, RectangleGeometry):
+    """A one-sided rectangle emitting on the ``normal`` side."""
+
+
+class DiskEmitter(_EmitterBase, DiskGeometry):
+    """A one-sided disk emitting on the ``normal`` side."""
 
 
 def _check_rectangle_frame(normal: list[float], up: list[float]) -> None:
@@ -400,52 +414,20 @@ class _ShapeBase(StrictModel):
     transform: Transform | None = None
 
 
-class SphereShape(_ShapeBase):
-    type: Literal["sphere"]
-    center_m: Vec3
-    radius_m: PositiveFloat
+class SphereShape(_ShapeBase, SphereGeometry):
+    """A sphere."""
 
 
-class CylinderShape(_ShapeBase):
+class CylinderShape(_ShapeBase, CylinderGeometry):
     """An open cylinder (side surface only, no caps) with axis from ``p0_m`` to ``p1_m``."""
 
-    type: Literal["cylinder"]
-    p0_m: Vec3
-    p1_m: Vec3
-    radius_m: PositiveFloat
 
-    @model_validator(mode="after")
-    def _axis(self) -> CylinderShape:
-        _check_direction([b - a for a, b in zip(self.p0_m, self.p1_m, strict=True)], "p1_m - p0_m")
-        return self
+class RectangleShape(_ShapeBase, RectangleGeometry):
+    """A two-sided rectangle."""
 
 
-class RectangleShape(_ShapeBase):
-    """A two-sided rectangle; ``height_m`` along ``up``, ``width_m`` along ``up × normal``."""
-
-    type: Literal["rectangle"]
-    center_m: Vec3
-    normal: Vec3
-    up: Vec3
-    width_m: PositiveFloat
-    height_m: PositiveFloat
-
-    @model_validator(mode="after")
-    def _frame(self) -> RectangleShape:
-        _check_rectangle_frame(self.normal, self.up)
-        return self
-
-
-class DiskShape(_ShapeBase):
-    type: Literal["disk"]
-    center_m: Vec3
-    normal: Vec3
-    radius_m: PositiveFloat
-
-    @model_validator(mode="after")
-    def _frame(self) -> DiskShape:
-        _check_direction(self.normal, "normal")
-        return self
+class DiskShape(_ShapeBase, DiskGeometry):
+    """A two-sided disk."""
 
 
 class MeshShape(_ShapeBase):
