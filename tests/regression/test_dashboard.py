@@ -85,7 +85,9 @@ def test_dashboard_shows_schedules_trend_and_compare(live_service: LiveService, 
     assert page.locator("#trend circle").get_attribute("fill") == "none"
     assert "thin_film: coherence_drift of l1_um" in page.locator("#runs").inner_text()
     page.locator("#runs button.verdict-fail").click()
-    page.locator("#compare section.compare canvas").first.wait_for()
+    # The dashboard opens the compare view on its ΔE₀₀ map: wait until it has drawn, then for that map.
+    page.wait_for_function("() => Number(document.querySelector('#compare .compare')?.dataset.ready) >= 1")
+    page.locator("#compare section.compare canvas.compare-diff").wait_for()
     caption = page.locator("#compare-caption").inner_text()
     assert baseline_run["scenes"][0]["job_id"] in caption and failing_run["scenes"][0]["job_id"] in caption
     screenshot(page, "regression-dashboard")
