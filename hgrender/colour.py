@@ -36,6 +36,19 @@ _HUE_TIE_DEG = 1e-9
 _LAB_EPSILON = (6.0 / 29.0) ** 3
 
 
+def band_edges_xyz_weights(edges_nm: np.ndarray, step_nm: float = 1.0) -> np.ndarray:
+    """∫_band (x̄, ȳ, z̄) dλ for bands between consecutive ``edges_nm`` (nm); shape (B, 3), in nm."""
+    edges = np.asarray(edges_nm, dtype=float)
+    if edges.ndim != 1 or edges.size < 2 or not np.all(np.diff(edges) > 0.0):
+        raise ValueError("edges_nm: must be at least 2 strictly increasing band edges")
+    weights = np.zeros((edges.size - 1, 3))
+    for band in range(edges.size - 1):
+        low_nm, high_nm = edges[band], edges[band + 1]
+        grid_nm = np.clip(np.arange(low_nm, high_nm + 0.5 * step_nm, step_nm), low_nm, high_nm)
+        weights[band] = np.trapezoid(cie_cmf(grid_nm), grid_nm, axis=0)
+    return weights
+
+
 def band_xyz_weights(band_centers_nm: np.ndarray, step_nm: float = 1.0) -> np.ndarray:
     """∫_band (x̄, ȳ, z̄) dλ for equal-width bands given by their centres (nm); shape (B, 3).
 
@@ -44,13 +57,15 @@ def band_xyz_weights(band_centers_nm: np.ndarray, step_nm: float = 1.0) -> np.nd
     centers_nm = np.asarray(band_centers_nm, dtype=float)
     if centers_nm.ndim != 1 or centers_nm.size < 2 or not np.all(np.diff(centers_nm) > 0.0):
         raise ValueError("band_centers_nm: must be at least 2 strictly increasing band centres")
-    width_nm = float(np.mean(np.diff(centers_nm)))
-    weights = np.zeros((centers_nm.size, 3))
-    for band, center_nm in enumerate(centers_nm):
-        low_nm, high_nm = center_nm - 0.5 * width_nm, center_nm + 0.5 * width_nm
-        grid_nm = np.clip(np.arange(low_nm, high_nm + 0.5 * step_nm, step_nm), low_nm, high_nm)
-        weights[band] = np.trapezoid(cie_cmf(grid_nm), grid_nm, axis=0)
-    return weights
+    half_width_nm = 0.5 * float(np.mean(np.diff(centers_nm)))
+    edges_nm = np.append(centers_nm - half_width_nm, centers_nm[-1] + half_width_nm)
+    return band_edges_xyz_weights(edges_nm, step_nm)
+
+
+def y_bar_integral_nm() -> float:
+    """∫ ȳ(λ) dλ over the CIE 1931 table (nm): the Y of a unit equal-energy spectrum before normalisation."""
+    grid_nm = np.arange(360.0, 830.5, 1.0)
+    return float(np.trapezoid(cie_cmf(grid_nm)[:, 1], grid_nm))
 
 
 def bands_to_xyz(band_values: np.ndarray, band_centers_nm: np.ndarray) -> np.ndarray:

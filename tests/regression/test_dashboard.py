@@ -7,7 +7,6 @@ Screenshot: test-artifacts/regression-dashboard.png."""
 from __future__ import annotations
 
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -18,34 +17,21 @@ from tests.web.conftest import screenshot
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = Path("/usr/bin/chromium")
-
 
 @pytest.fixture()
-def page(live_service: LiveService) -> Iterator[Any]:
-    if not CHROMIUM.is_file():
-        pytest.fail(f"{CHROMIUM} is missing: install Debian's chromium package (make setup does)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(
-            executable_path=str(CHROMIUM), args=["--headless=new", "--no-sandbox", "--disable-gpu"]
-        )
-        context = browser.new_context(viewport={"width": 1280, "height": 900})
-        context.add_init_script(
-            f"window.localStorage.setItem('hgrender.token', {live_service.admin_token!r});"
-        )
-        page = context.new_page()
-        page.set_default_timeout(
-            60_000
-        )  # the test machine's 2 cores are shared: allow slow renders of the page
-        errors: list[str] = []
-        page.on("pageerror", lambda error: errors.append(str(error)))
-        try:
-            yield page
-        finally:
-            browser.close()
-        assert not errors, errors
+def page(live_service: LiveService, chromium: Any) -> Iterator[Any]:
+    """A page on the session's shared headless Chromium (tests/conftest.py) with the admin token set."""
+    context = chromium.new_context(viewport={"width": 1280, "height": 900})
+    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {live_service.admin_token!r});")
+    page = context.new_page()
+    page.set_default_timeout(60_000)  # the test machine's 2 cores are shared: allow slow renders of the page
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    try:
+        yield page
+    finally:
+        context.close()
+    assert not errors, errors
 
 
 def test_dashboard_shows_schedules_trend_and_compare(live_service: LiveService, page: Any) -> None:

@@ -25,17 +25,6 @@ from service.redis_server import free_loopback_port
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ARTIFACTS_DIR = REPO_ROOT / "test-artifacts"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 SIZE_PX = 24
 SPP = 4
 
@@ -231,20 +220,6 @@ def diagonal_cylinder_job(served: Served, tmp_path_factory: pytest.TempPathFacto
     out_dir = tmp_path_factory.mktemp("diagonal-job")
     served.client.download(job_id, "image.exr", out_dir / "image.exr")
     return RenderedJob(job_id, read_exr(out_dir / "image.exr"))
-
-
-@pytest.fixture(scope="session")
-def chromium() -> Iterator[Any]:
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is absent (install it with `make system-packages`)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            yield browser
-        finally:
-            browser.close()
 
 
 @pytest.fixture

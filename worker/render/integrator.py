@@ -200,8 +200,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         medium: mi.Medium = None,
         active: bool = True,
     ) -> tuple[mi.Spectrum, mi.Bool, list]:
-        result = self.trace(scene, sampler, mi.Ray3f(ray), mi.Bool(active))
-        return result.radiance, dr.any(result.radiance != 0.0) | mi.Bool(True), []
+        """Mitsuba's integrator interface (``mi.render`` with an hdrfilm), after ``attach``: radiance only;
+        hgrender's own renderer (``worker.render.renderer``) also collects bands and diagnostics."""
+        active = mi.Bool(active)
+        result = self.trace(scene, sampler, mi.Ray3f(ray), active)
+        return result.radiance, active, []
 
     def aov_names(self) -> list[str]:
         return []

@@ -3,9 +3,10 @@
 ``image.exr`` follows Fichet, Pacanowski & Wilkie (JCGT 10(3), 2021): emissive channels ``S0.<λ>nm``
 (band centres, six decimals, comma separator), attributes ``spectralLayoutVersion`` = ``1.0`` and
 ``emissiveUnits`` = ``W.m^-2.sr^-1``; ``R``, ``G``, ``B`` linear sRGB (CIE 1931 2°, D65 white, XYZ from
-the bands); the BRIEF's ``coherence.*`` diagnostics; ``depth`` (m), ``normal.X/Y/Z`` (world) and
-``albedo.R/G/B`` of the first hit. ``variance.exr`` holds the variance of each band's pixel mean
-(σ²/N, from the per-sample second moments) for noise-aware regression tests. Writes are atomic.
+the bands, normalised so that a unit equal-energy spectrum has Y = 1); the BRIEF's ``coherence.*``
+diagnostics; ``depth`` (m), ``normal.X/Y/Z`` (world) and ``albedo.R/G/B`` of the first hit.
+``variance.exr`` holds the variance of each band's pixel mean (σ²/N, from the per-sample second moments)
+for noise-aware regression tests. Writes are atomic.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from hgrender.colour import band_edges_xyz_weights, y_bar_integral_nm
 from hgrender.imaging import auto_exposure_ev, display_rgb8
 from worker.optics import spectra
 from worker.optics.coherence import diagnostics_components
@@ -41,23 +43,13 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
-def band_cmf_weights(bands: BandLayout, step_nm: float = 1.0) -> np.ndarray:
-    """∫_band (x̄, ȳ, z̄) dλ per band (nm), shape (B, 3): XYZ = Σ_b L_b · weight_b."""
-    weights = np.zeros((bands.band_count, 3))
-    edges = bands.edges_nm
-    for band in range(bands.band_count):
-        grid = np.arange(edges[band], edges[band + 1] + 0.5 * step_nm, step_nm)
-        grid = np.clip(grid, edges[band], edges[band + 1])
-        weights[band] = np.trapezoid(spectra.cie_cmf(grid), grid, axis=0)
-    return weights
-
-
 def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray]:
     """Per-pixel means and diagnostics (float32 arrays of shape (H, W) or (H, W, B))."""
     count = float(sums.sample_count)
     band_mean = sums.bands / count
     band_variance = np.maximum(sums.bands_sq / count - band_mean**2, 0.0) / count
-    xyz = band_mean @ band_cmf_weights(bands)
+    # Normalised so that a unit equal-energy spectrum has Y = 1 (Mitsuba's film convention).
+    xyz = band_mean @ band_edges_xyz_weights(bands.edges_nm) / y_bar_integral_nm()
     rgb = spectra.xyz_to_linear_srgb(xyz)
     values = sums.values
     weight = values["diag_w"]
