@@ -175,69 +175,48 @@ class MaterialKernels:
         """
         mi = self.mi
         kind = self.kind(material)
-        wo = mi.Vector3f(0.0, 0.0, 1.0)
-        weight = mi.Spectrum(0.0)
-        pdf = mi.Float(0.0)
-        delta = mi.Bool(False)
+        # (wo, weight, pdf, delta) of the branch each lane takes
+        state = (mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Float(0.0), mi.Bool(False))
         film_terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
         front = active & (wi.z > 0)
         if mat.MaterialKind.DIFFUSE in self.kinds:
-            is_kind = front & (kind == int(mat.MaterialKind.DIFFUSE))
             direction = mi.warp.square_to_cosine_hemisphere(sample2)
-            wo = dr.select(is_kind, direction, wo)
-            weight = dr.select(is_kind, self.spectrum(material, mat.REFLECTANCE_ID, wavelengths), weight)
-            pdf = dr.select(is_kind, mi.warp.square_to_cosine_hemisphere_pdf(direction), pdf)
-        if mat.MaterialKind.MIRROR in self.kinds:
-            is_kind = front & (kind == int(mat.MaterialKind.MIRROR))
-            wo = dr.select(is_kind, mi.reflect(wi), wo)
-            weight = dr.select(is_kind, self.interface_reflectance(material, wi.z, wavelengths), weight)
-            pdf = dr.select(is_kind, 1.0, pdf)
-            delta |= is_kind
-        if mat.MaterialKind.DIELECTRIC in self.kinds:
-            is_kind = active & (kind == int(mat.MaterialKind.DIELECTRIC))
-            d_wo, d_weight = self._dielectric_sample(material, wi, wavelengths, sample1)
-            wo = dr.select(is_kind, d_wo, wo)
-            weight = dr.select(is_kind, d_weight, weight)
-            pdf = dr.select(is_kind, 1.0, pdf)
-            delta |= is_kind
-        for index, surface in self._per_material(mat.MaterialKind.ROUGH_CONDUCTOR):
-            is_this = front & (material == index)
-            r_wo, r_weight, r_pdf, r_delta = self._rough_sample(
-                material, surface, wi, wavelengths, sample1, sample2, None
+            diffuse = (
+                direction,
+                self.spectrum(material, mat.REFLECTANCE_ID, wavelengths),
+                mi.warp.square_to_cosine_hemisphere_pdf(direction),
+                mi.Bool(False),
             )
-            wo = dr.select(is_this, r_wo, wo)
-            weight = dr.select(is_this, r_weight, weight)
-            pdf = dr.select(is_this, r_pdf, pdf)
-            delta |= is_this & r_delta
+            state = _take(front & (kind == int(mat.MaterialKind.DIFFUSE)), diffuse, state)
+        if mat.MaterialKind.MIRROR in self.kinds:
+            mirror = (
+                mi.reflect(wi),
+                self.interface_reflectance(material, wi.z, wavelengths),
+                mi.Float(1.0),
+                mi.Bool(True),
+            )
+            state = _take(front & (kind == int(mat.MaterialKind.MIRROR)), mirror, state)
+        if mat.MaterialKind.DIELECTRIC in self.kinds:
+            d_wo, d_weight = self._dielectric_sample(material, wi, wavelengths, sample1)
+            glass = (d_wo, d_weight, mi.Float(1.0), mi.Bool(True))
+            state = _take(active & (kind == int(mat.MaterialKind.DIELECTRIC)), glass, state)
+        for index, surface in self._per_material(mat.MaterialKind.ROUGH_CONDUCTOR):
+            sampled = self._rough_sample(material, surface, wi, wavelengths, sample1, sample2, None)
+            state = _take(front & (material == index), sampled, state)
         for index, surface in self._per_material(mat.MaterialKind.THIN_FILM):
             is_this = front & (material == index)
-            r_wo, r_weight, r_pdf, r_delta = self._rough_sample(
-                material, surface, wi, wavelengths, sample1, sample2, film_terms_out := []
-            )
-            wo = dr.select(is_this, r_wo, wo)
-            weight = dr.select(is_this, r_weight, weight)
-            pdf = dr.select(is_this, r_pdf, pdf)
-            delta |= is_this & r_delta
-            for slot, term in enumerate(film_terms_out[0]):
+            terms_out: list = []
+            sampled = self._rough_sample(material, surface, wi, wavelengths, sample1, sample2, terms_out)
+            state = _take(is_this, sampled, state)
+            for slot, term in enumerate(terms_out[0]):
                 film_terms[slot] = dr.select(is_this, term, film_terms[slot])
         for index, surface in self._per_material(mat.MaterialKind.ROUGH_DIELECTRIC):
-            is_this = active & (material == index) & (wi.z != 0)
-            d_wo, d_weight, d_pdf, d_delta = self._rough_dielectric_sample(
-                material, surface, wi, wavelengths, sample1, sample2
-            )
-            wo = dr.select(is_this, d_wo, wo)
-            weight = dr.select(is_this, d_weight, weight)
-            pdf = dr.select(is_this, d_pdf, pdf)
-            delta |= is_this & d_delta
+            sampled = self._rough_dielectric_sample(material, surface, wi, wavelengths, sample1, sample2)
+            state = _take(active & (material == index) & (wi.z != 0), sampled, state)
         for index, grating in self._per_material(mat.MaterialKind.GRATING):
-            is_this = front & (material == index)
-            g_wo, g_weight, g_pdf, g_delta = self._grating_sample(
-                material, grating, wi, wavelengths, sample1, sample2
-            )
-            wo = dr.select(is_this, g_wo, wo)
-            weight = dr.select(is_this, g_weight, weight)
-            pdf = dr.select(is_this, g_pdf, pdf)
-            delta |= is_this & g_delta
+            sampled = self._grating_sample(material, grating, wi, wavelengths, sample1, sample2)
+            state = _take(front & (material == index), sampled, state)
+        wo, weight, pdf, delta = state
         return wo, dr.select(active, weight, 0.0), pdf, delta, film_terms
 
     # ---------------------------------------------------------------- smooth dielectric
@@ -607,6 +586,11 @@ class MaterialKernels:
         )
         pdf = dr.select(choose_specular, 1.0, lobe_pdf)
         return wo, weight, pdf, choose_specular
+
+
+def _take(mask: Any, sampled: tuple, state: tuple) -> tuple:
+    """Per lane, the sample (wo, weight, pdf, delta) of the material branch selected by ``mask``."""
+    return tuple(dr.select(mask, new, old) for new, old in zip(sampled, state, strict=True))
 
 
 def combine_film_terms(terms: list[Any], visibility_at: Callable[[int], Any]) -> Any:
