@@ -96,6 +96,46 @@ FIG7_LIGHT_CENTER_M = (0.0, 0.1, 0.2)
 FIG7_POWER_W = 10.0
 
 
+def fringe_film(width: int, height: int, *, spp: int, max_depth: int) -> dict[str, Any]:
+    """The film of the fringe experiments: FIG7_BANDS bands over FIG7_WAVELENGTH_RANGE_NM."""
+    return {
+        "width": width,
+        "height": height,
+        "bands": FIG7_BANDS,
+        "spp": spp,
+        "max_depth": max_depth,
+        "wavelength_min_nm": FIG7_WAVELENGTH_RANGE_NM[0],
+        "wavelength_max_nm": FIG7_WAVELENGTH_RANGE_NM[1],
+    }
+
+
+def two_beam_coating(
+    film: dict[str, Any], *, roughness_rms_um: float, correlation_length_um: float
+) -> dict[str, Any]:
+    """A thin-film material of ``film`` (thickness, index, substrate) with two beams: the paper's Eq. (18)."""
+    return {
+        "type": "thin_film",
+        "film_thickness_um": film["thickness_um"],
+        "film_ior": film["ior"],
+        "substrate": {"conductor": film["substrate"]},
+        "roughness_rms_um": roughness_rms_um,
+        "correlation_length_um": correlation_length_um,
+        "beams": 2,
+    }
+
+
+# A 0.5 m coated square in the z = 0 plane, facing +z.
+COATED_PLANE = {
+    "type": "rectangle",
+    "material": "coating",
+    "center_m": [0.0, 0.0, 0.0],
+    "normal": [0.0, 0.0, 1.0],
+    "up": [0.0, 1.0, 0.0],
+    "width_m": 0.5,
+    "height_m": 0.5,
+}
+
+
 def fig7_sphere_light() -> dict[str, Any]:
     """The paper's sphere source (radius 0.6 cm), 17.5 cm from the highlight: coherence ≈ 5 µm."""
     return {
@@ -135,25 +175,9 @@ def fig7_coated_sphere(light: dict[str, Any], *, spp: int) -> dict[str, Any]:
             "up": [0.0, 1.0, 0.0],
             "fov_deg": 6.5,
         },
-        "film": {
-            "width": 32,
-            "height": 12,
-            "bands": FIG7_BANDS,
-            "spp": spp,
-            "max_depth": 2,
-            "wavelength_min_nm": FIG7_WAVELENGTH_RANGE_NM[0],
-            "wavelength_max_nm": FIG7_WAVELENGTH_RANGE_NM[1],
-        },
+        "film": fringe_film(32, 12, spp=spp, max_depth=2),
         "materials": {
-            "coating": {
-                "type": "thin_film",
-                "film_thickness_um": FIG7_FILM["thickness_um"],
-                "film_ior": FIG7_FILM["ior"],
-                "substrate": {"conductor": FIG7_FILM["substrate"]},
-                "roughness_rms_um": 0.15,
-                "correlation_length_um": 1.0,
-                "beams": 2,
-            }
+            "coating": two_beam_coating(FIG7_FILM, roughness_rms_um=0.15, correlation_length_um=1.0)
         },
         "shapes": [
             {
@@ -256,38 +280,12 @@ def fig8_coated_plane(*, via_mirror: bool, spp: int) -> dict[str, Any]:
             "up": [0.0, 1.0, 0.0],
             "fov_deg": 4.0,
         },
-        "film": {
-            "width": 8,
-            "height": 8,
-            "bands": FIG7_BANDS,
-            "spp": spp,
-            "max_depth": 3,
-            "wavelength_min_nm": FIG7_WAVELENGTH_RANGE_NM[0],
-            "wavelength_max_nm": FIG7_WAVELENGTH_RANGE_NM[1],
-        },
+        "film": fringe_film(8, 8, spp=spp, max_depth=3),
         "materials": {
-            "coating": {
-                "type": "thin_film",
-                "film_thickness_um": FIG8_FILM["thickness_um"],
-                "film_ior": FIG8_FILM["ior"],
-                "substrate": {"conductor": FIG8_FILM["substrate"]},
-                "roughness_rms_um": 0.15,
-                "correlation_length_um": 2.0,
-                "beams": 2,
-            },
+            "coating": two_beam_coating(FIG8_FILM, roughness_rms_um=0.15, correlation_length_um=2.0),
             "mirror": {"type": "mirror", "conductor": "perfect"},
         },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "coating",
-                "center_m": [0.0, 0.0, 0.0],
-                "normal": [0.0, 0.0, 1.0],
-                "up": [0.0, 1.0, 0.0],
-                "width_m": 0.5,
-                "height_m": 0.5,
-            }
-        ],
+        "shapes": [COATED_PLANE],
         "emitters": [
             {
                 "type": "sphere",
@@ -331,37 +329,11 @@ def smooth_coated_plane_mirroring_light(*, spp: int) -> dict[str, Any]:
             "up": [0.0, 1.0, 0.0],
             "fov_deg": 1.0,
         },
-        "film": {
-            "width": 8,
-            "height": 8,
-            "bands": FIG7_BANDS,
-            "spp": spp,
-            "max_depth": 2,
-            "wavelength_min_nm": FIG7_WAVELENGTH_RANGE_NM[0],
-            "wavelength_max_nm": FIG7_WAVELENGTH_RANGE_NM[1],
-        },
+        "film": fringe_film(8, 8, spp=spp, max_depth=2),
         "materials": {
-            "coating": {
-                "type": "thin_film",
-                "film_thickness_um": FIG7_FILM["thickness_um"],
-                "film_ior": FIG7_FILM["ior"],
-                "substrate": {"conductor": FIG7_FILM["substrate"]},
-                "roughness_rms_um": 0.001,
-                "correlation_length_um": 5.0,
-                "beams": 2,
-            }
+            "coating": two_beam_coating(FIG7_FILM, roughness_rms_um=0.001, correlation_length_um=5.0)
         },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "coating",
-                "center_m": [0.0, 0.0, 0.0],
-                "normal": [0.0, 0.0, 1.0],
-                "up": [0.0, 1.0, 0.0],
-                "width_m": 0.5,
-                "height_m": 0.5,
-            }
-        ],
+        "shapes": [COATED_PLANE],
         "emitters": [
             {
                 "type": "sphere",
