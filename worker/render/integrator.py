@@ -27,26 +27,25 @@ contributions the resolved Σ⊥ of the first vertex's indirect light.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import drjit as dr
 
 from worker.mitsuba_setup import load_mitsuba
+from worker.optics import sources
 from worker.optics.array_ops import drjit_ops
 from worker.optics.coherence import degree_of_coherence
 from worker.optics.frames import transverse_frame_components
 from worker.render import materials as mat
 from worker.render.bsdfs import IncidentCoherence, MaterialKernels, combine_film_terms
 from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect
-from worker.render.spectral import LAMBDA_REFERENCE_NM, BandLayout
+from worker.render.spectral import K_REFERENCE_PER_M, BandLayout
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
 # (``load_mitsuba`` honours HGRENDER_VARIANT; ``auto`` picks cuda_ad_spectral when a GPU is usable).
 mi = load_mitsuba()
 OPS = drjit_ops()
-K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)
 
 
 @dataclass
@@ -149,8 +148,6 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
     def _scattering_region(self, material: Any, normal: Any, direction: Any, frame_x: Any, frame_y: Any):
         """Σ⊥ of a non-specular vertex's scattering region (uniform disk in the tangent plane)."""
-        from worker.optics import sources
-
         radius = self.kernels.param(material, mat.SCATTERING_REGION_RADIUS_M)
         del direction  # the disk's projection depends on the frame ⟂ the direction only
         return sources.disk_covariance_components(

@@ -12,7 +12,6 @@ for noise-aware regression tests. Writes are atomic.
 from __future__ import annotations
 
 import json
-import math
 import os
 import tempfile
 from pathlib import Path
@@ -25,9 +24,8 @@ from hgrender.imaging import auto_exposure_ev, display_rgb8
 from worker.optics import spectra
 from worker.optics.coherence import diagnostics_components
 from worker.render.pixel_sums import PixelSums
-from worker.render.spectral import LAMBDA_REFERENCE_NM, BandLayout
+from worker.render.spectral import K_REFERENCE_PER_M, LAMBDA_REFERENCE_NM, BandLayout
 
-K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)
 COHERENCE_CHANNELS = ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy")
 
 

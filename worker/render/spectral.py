@@ -12,6 +12,7 @@ Material spectra (reflectances, refractive indices) live in one flat table sampl
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ GRID_MAX_NM = 2500.0
 GRID_STEP_NM = 5.0
 GRID_SIZE = round((GRID_MAX_NM - GRID_MIN_NM) / GRID_STEP_NM) + 1
 LAMBDA_REFERENCE_NM = 550.0  # diagnostics are reported at this wavelength (BRIEF)
+K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)  # its wavenumber k (1/m)
 
 
 def grid_wavelengths_nm() -> np.ndarray:
