@@ -98,14 +98,14 @@ def emitter_coherence(
     table: Any,
     kinds: set[EmitterKind],
     emitter_index: Any,
-    direction: Any,
     frame_x: Any,
     frame_y: Any,
 ) -> tuple[Any, Any, Any]:
-    """Σ⊥ (m²) of emitter ``emitter_index`` (UInt32 per lane) seen along ``direction`` (centre → receiver).
+    """Σ⊥ (m²) of emitter ``emitter_index`` (UInt32 per lane) seen along the direction ⟂ to the frame.
 
     Returns ``(sigma_xx, sigma_xy, sigma_yy)`` in the frame spanned by ``frame_x``/``frame_y``, which the
-    caller makes ⟂ to ``direction``. Only branches for emitter ``kinds`` present in the scene are compiled
+    caller makes ⟂ to the centre → receiver direction: the projected silhouettes depend on that frame
+    only. Only branches for emitter ``kinds`` present in the scene are compiled
     into the kernel.
     """
     import drjit as dr
@@ -152,5 +152,4 @@ def emitter_coherence(
             kind == int(EmitterKind.DISK),
             sources.disk_covariance_components(radius, vec(read3(AXIS)), fx, fy),
         )
-    del direction  # the silhouettes' projections depend on the frame ⟂ to it only
     return sigma

@@ -146,10 +146,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         )
         return mi.Vector3f(*x_axis), mi.Vector3f(*y_axis)
 
-    def _scattering_region(self, material: Any, normal: Any, direction: Any, frame_x: Any, frame_y: Any):
-        """Σ⊥ of a non-specular vertex's scattering region (uniform disk in the tangent plane)."""
+    def _scattering_region(self, material: Any, normal: Any, frame_x: Any, frame_y: Any):
+        """Σ⊥ of a non-specular vertex's scattering region (uniform disk in the tangent plane), in the
+        frame ⟂ to the direction it is seen along (the projection depends on that frame only)."""
         radius = self.kernels.param(material, mat.SCATTERING_REGION_RADIUS_M)
-        del direction  # the disk's projection depends on the frame ⟂ the direction only
         return sources.disk_covariance_components(
             radius,
             (normal.x, normal.y, normal.z),
@@ -293,17 +293,15 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             em_record = self._emitter_lookup(emitter_ptr)
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
-                to_prev = -ray.d
                 em_sxx, em_sxy, em_syy = emitter_coherence(
                     mi,
                     self.context.emitter_flat,
                     self.context.emitter_kinds,
                     em_record,
-                    ray.d,
                     frame_x,
                     frame_y,
                 )
-                sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, to_prev, frame_x, frame_y)
+                sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, frame_x, frame_y)
                 src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
                 src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
                 src_yy = dr.select(hit_emitter, em_syy, sr_yy)
@@ -406,7 +404,6 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                     self.context.emitter_flat,
                     self.context.emitter_kinds,
                     em_record_nee,
-                    nee_dir,
                     nee_fx,
                     nee_fy,
                 )
