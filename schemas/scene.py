@@ -44,6 +44,8 @@ MATERIAL_ID_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
 #: Hard caps built into the schema; the deployment limits in :class:`schemas.limits.SceneLimits` are lower.
 ABSOLUTE_MAX_RESOLUTION_PX = 16384
 ABSOLUTE_MAX_SPP = 1 << 20
+MAX_FILM_MODES = 16
+"""The most HG modes a film may ask for (``film.modes``)."""
 
 
 class StrictModel(BaseModel):
@@ -289,7 +291,7 @@ class Film(StrictModel):
     spp: Annotated[int, Field(ge=1, le=ABSOLUTE_MAX_SPP)] = 64
     seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = 0
     #: Number of HG modes per interaction (1 = the paper's 0th-order approximation; Fig. 9 uses 16).
-    modes: Annotated[int, Field(ge=1, le=16)] = 1
+    modes: Annotated[int, Field(ge=1, le=MAX_FILM_MODES)] = 1
     max_depth: Annotated[int, Field(ge=1, le=64)] = 8
 
     @model_validator(mode="after")

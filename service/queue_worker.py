@@ -16,6 +16,12 @@ it kills its work horse and puts the chunk back at the front of its queue, witho
 chunk's retries. A second SIGTERM (cold shutdown) hands the chunk back at once. A chunk is handed back only
 while RQ still records it as started, so a chunk that completed is never queued again; a re-run
 overwrites the same artifact key, so a job ends with one set of artifacts either way.
+
+A job's final step (its merge, or the only step of a one-chunk job) fails the job itself when it raises on
+its last attempt. When it cannot, because its horse died (killed, out of memory) or its whole worker did
+on that attempt, this worker fails the job: in ``handle_job_failure`` for a dead horse, and in an
+exception handler for the abandoned step that a maintenance pass finds. A failed chunk of a multi-chunk job
+needs neither: the merge step, which runs after failed chunks too, reports it.
 """
 
 from __future__ import annotations
@@ -27,12 +33,15 @@ from types import FrameType
 
 import redis
 from rq import Queue, Worker
+from rq.exceptions import AbandonedJobError
 from rq.executions import Execution
 from rq.job import Job, JobStatus
 from rq.registry import StartedJobRegistry
 from rq.utils import now
 
 from service.core.config import QUEUE_NAMES, Settings
+from service.jobs import FINAL_STEP_TASKS, JobService
+from service.store import store_from_settings
 
 
 class RenderWorker(Worker):
@@ -41,6 +50,7 @@ class RenderWorker(Worker):
 
     heartbeat_grace_s: int = 60
     shutdown_grace_s: int = 40
+    settings: Settings | None = None  # for failing jobs whose final step died (set by build_worker)
     _handing_back_job_id: str | None = None
 
     def get_heartbeat_ttl(self, job: Job, working_time: float = 0.0) -> int:
@@ -85,6 +95,25 @@ class RenderWorker(Worker):
             self.hand_back(job, queue, execution)
             return
         super().handle_job_failure(job, queue, started_job_registry, exc_string, execution)
+        if job.get_status(refresh=True) == JobStatus.FAILED:  # neither retried nor stopped by a cancel
+            last_lines = exc_string.strip().splitlines()[-1:]
+            self.fail_job_of_final_step(job, last_lines[0] if last_lines else "failed")
+
+    def handle_abandoned_final_step(self, job: Job, exc_type: type, *_exc_info: object) -> None:
+        """Exception handler (also called for abandoned jobs by the registries' cleanup): a final step
+        whose worker died on its last attempt fails its job. Returns None: the next handlers still run."""
+        if exc_type is AbandonedJobError and not job.retries_left:
+            self.fail_job_of_final_step(job, "its worker died (heartbeat lapsed) on the last attempt")
+
+    def fail_job_of_final_step(self, job: Job, reason: str) -> None:
+        """Fail the hgrender job whose final step ``job`` failed for good with ``reason`` (one line),
+        unless the step already did, or the job ended otherwise."""
+        if job.func_name not in FINAL_STEP_TASKS or self.settings is None:
+            return
+        from worker.tasks import fail_job  # the worker process has it loaded (preload_renderer)
+
+        jobs = JobService(self.connection, store_from_settings(self.settings), self.settings)
+        fail_job(jobs, job.args[0], f"{job.description}: {reason}")
 
     def request_force_stop(self, signum: int, frame: FrameType | None) -> None:
         """Cold shutdown (second SIGTERM/SIGINT): RQ kills the horse and exits; hand its job back first."""
@@ -129,6 +158,8 @@ def build_worker(settings: Settings, client: redis.Redis, name: str | None = Non
     )
     worker.heartbeat_grace_s = settings.worker_heartbeat_grace_s
     worker.shutdown_grace_s = settings.worker_shutdown_grace_s
+    worker.settings = settings
+    worker.push_exc_handler(worker.handle_abandoned_final_step)
     return worker
 
 

@@ -1,4 +1,5 @@
-"""RQ job functions: render one chunk of a job, and merge a job's chunks into its final artifacts.
+"""RQ job functions: render one chunk of a job, merge a job's chunks into its final artifacts, or do both
+for a job of one chunk; and fail a job whose final step failed for good.
 
 They run in RQ's forked work horse (``service.queue_worker``), so the renderer (Mitsuba, Dr.Jit) is
 imported here and never in the API process. A chunk renders spp partition ``i`` of
@@ -6,15 +7,20 @@ imported here and never in the API process. A chunk renders spp partition ``i`` 
 store; a retried chunk uploads to the same key, so a retry never leaves a duplicate. The merge step runs
 after every chunk ended (success or failure) and writes ``image.exr``, ``preview.png``,
 ``summary.json`` (and whatever else ``merge_chunks`` produces), ``worker.log`` and ``manifest.json``.
+A one-chunk job runs both in one work horse and keeps its partial sums local.
 """
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import json
 import os
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +29,7 @@ from rq.exceptions import NoSuchJobError
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
+from schemas.scene import MAX_FILM_MODES, Scene
 from service.core.config import Settings
 from service.jobs import JobService, chunk_key, chunk_rq_id, scene_key
 from service.models import TERMINAL_STATUSES, JobStatus
@@ -50,6 +57,14 @@ def preload_renderer() -> None:
     PIL.Image.init()  # registers the image plugins now, not at the first save in each horse (~20 ms)
 
     import worker.render.api  # noqa: F401
+    from worker.optics.sources import source_coefficients
+
+    for modes in range(1, MAX_FILM_MODES + 1):  # the renderer's disk and rectangle expansions (~3 ms each)
+        source_coefficients("disk", modes)
+        source_coefficients("rect", modes)
+    # Objects that exist now are left alone by the collector, so a horse's garbage collections do not
+    # copy the worker's memory pages (copy-on-write) that it would otherwise only read.
+    gc.freeze()
 
 
 def _context() -> tuple[JobService, RQJob]:
@@ -101,35 +116,91 @@ def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> tuple[dict[st
     return jobs.scene(job_id), bundle_dir if inputs else None
 
 
+class StepFailedError(RuntimeError):
+    """An error of one step of a job, its message prefixed with the step (``chunk 0: …``, ``merge: …``)."""
+
+
+@contextmanager
+def _step(name: str) -> Iterator[None]:
+    """Label any error raised inside with the step ``name`` (the job's error names where it failed)."""
+    try:
+        yield
+    except StepFailedError:
+        raise
+    except Exception as error:
+        raise StepFailedError(f"{name}: {type(error).__name__}: {error}") from error
+
+
+@dataclass(frozen=True)
+class RenderedChunk:
+    path: Path  # its partial sums (.npz)
+    result: dict[str, Any]  # ``worker.render.api.render_chunk``'s
+    scene: Scene  # as validated for the render
+
+
+def _render_chunk(
+    jobs: JobService, rq_job: RQJob, job_id: str, record: dict[str, str], chunk_index: int, work_dir: Path
+) -> RenderedChunk | None:
+    """Render one chunk into ``work_dir``, or return None when the job was canceled meanwhile."""
+    from worker.render.api import as_scene, plan_chunks, render_chunk
+
+    chunk = plan_chunks(int(record["spp"]), int(record["chunks"]), int(record["seed"]))[chunk_index]
+    jobs.chunk_started(job_id, chunk_index, rq_job.worker_name or "", os.getpid(), chunk.spp)
+    should_stop = _CancelPoll(jobs, job_id)
+    scene_document, bundle_dir = _load_inputs(jobs, job_id, work_dir)
+    scene = as_scene(scene_document)
+    out_path = work_dir / f"chunk-{chunk_index}.npz"
+    result = render_chunk(
+        scene,
+        chunk,
+        out_path,
+        progress=_ProgressReporter(jobs, job_id, chunk_index, jobs.settings.progress_interval_s),
+        should_stop=should_stop,
+        bundle_dir=bundle_dir,
+    )
+    if should_stop(force=True):
+        jobs.set_chunk_status(job_id, chunk_index, "canceled")
+        return None
+    return RenderedChunk(out_path, result, scene)
+
+
 def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
     """Render chunk ``chunk_index`` of job ``job_id`` and upload its partial buffers."""
     jobs, rq_job = _context()
     record = jobs.record(job_id)
     if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
         return {"skipped": record.get("status", "deleted")}
-    from worker.render.api import plan_chunks, render_chunk
-
-    chunk = plan_chunks(int(record["spp"]), int(record["chunks"]), int(record["seed"]))[chunk_index]
-    jobs.chunk_started(job_id, chunk_index, rq_job.worker_name or "", os.getpid(), chunk.spp)
-    should_stop = _CancelPoll(jobs, job_id)
     with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-{chunk_index}-") as tmp:
-        work_dir = Path(tmp)
-        scene, bundle_dir = _load_inputs(jobs, job_id, work_dir)
-        out_path = work_dir / f"chunk-{chunk_index}.npz"
-        result = render_chunk(
-            scene,
-            chunk,
-            out_path,
-            progress=_ProgressReporter(jobs, job_id, chunk_index, jobs.settings.progress_interval_s),
-            should_stop=should_stop,
-            bundle_dir=bundle_dir,
-        )
-        if should_stop(force=True):
-            jobs.set_chunk_status(job_id, chunk_index, "canceled")
+        rendered = _render_chunk(jobs, rq_job, job_id, record, chunk_index, Path(tmp))
+        if rendered is None:
             return {"canceled": True}
-        jobs.store.put_file(chunk_key(job_id, chunk_index), out_path)
-    jobs.chunk_finished(job_id, chunk_index, int(result["samples"]), float(result["seconds"]))
-    return {"samples": int(result["samples"]), "seconds": float(result["seconds"])}
+        jobs.store.put_file(chunk_key(job_id, chunk_index), rendered.path)
+    samples, seconds = int(rendered.result["samples"]), float(rendered.result["seconds"])
+    jobs.chunk_finished(job_id, chunk_index, samples, seconds)
+    return {"samples": samples, "seconds": seconds}
+
+
+def render_job_task(job_id: str) -> dict[str, Any]:
+    """Render a job of one chunk and write its final artifacts, in one work horse. A failure on the last
+    attempt fails the job with the step's error."""
+    jobs, rq_job = _context()
+    try:
+        record = jobs.record(job_id)
+        if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
+            return {"skipped": record.get("status", "deleted")}
+        with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-") as tmp:
+            work_dir = Path(tmp)
+            with _step("chunk 0"):
+                rendered = _render_chunk(jobs, rq_job, job_id, record, 0, work_dir)
+            if rendered is None:
+                return {"canceled": True}
+            result = rendered.result
+            jobs.chunk_finished(job_id, 0, int(result["samples"]), float(result["seconds"]))
+            with _step("merge"):
+                return _write_final_artifacts(jobs, rq_job, job_id, [rendered.path], work_dir, rendered.scene)
+    except StepFailedError as error:
+        _fail_on_last_attempt(jobs, rq_job, job_id, str(error))
+        raise
 
 
 def _chunk_failures(jobs: JobService, job_id: str, chunk_count: int) -> list[str]:
@@ -207,49 +278,71 @@ def _fail(jobs: JobService, job_id: str, error: str) -> None:
         _write_manifest(jobs, job_id, artifacts, {})  # canceled meanwhile
 
 
+def _fail_on_last_attempt(jobs: JobService, rq_job: RQJob, job_id: str, error: str) -> None:
+    """Fail the job when this attempt of its final step was the last (RQ retries the others)."""
+    if not rq_job.retries_left:
+        fail_job(jobs, job_id, error)
+
+
+def fail_job(jobs: JobService, job_id: str, error: str) -> None:
+    """Fail the job unless it already ended (it may have been canceled or deleted meanwhile). Also called
+    by the worker when a final step's work horse died on its last attempt (``service.queue_worker``)."""
+    if jobs.status(job_id) not in {*TERMINAL_STATUSES, None}:
+        _fail(jobs, job_id, error)
+
+
 def merge_task(job_id: str) -> dict[str, Any]:
     """Merge the chunks of ``job_id`` into the final artifacts, or fail the job if a chunk failed. An
     error in the merge itself is retried like a chunk's; the last attempt fails the job with it."""
     jobs, rq_job = _context()
     try:
-        return _merge(jobs, rq_job, job_id)
-    except Exception as error:
-        if not rq_job.retries_left and jobs.status(job_id) not in TERMINAL_STATUSES:
-            _fail(jobs, job_id, f"merge: {type(error).__name__}: {error}")
+        record = jobs.record(job_id)
+        if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
+            return {"skipped": record.get("status", "deleted")}
+        chunk_count = int(record["chunks"])
+        failures = _chunk_failures(jobs, job_id, chunk_count)
+        if failures:
+            _fail(jobs, job_id, "; ".join(failures))
+            return {"failed": failures}
+        with _step("merge"), tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-merge-") as tmp:
+            work_dir = Path(tmp)
+            chunk_paths = []
+            for index in range(chunk_count):
+                path = work_dir / "chunks" / f"{index}.npz"
+                jobs.store.get_file(chunk_key(job_id, index), path)
+                chunk_paths.append(path)
+            return _write_final_artifacts(jobs, rq_job, job_id, chunk_paths, work_dir)
+    except StepFailedError as error:
+        _fail_on_last_attempt(jobs, rq_job, job_id, str(error))
         raise
 
 
-def _merge(jobs: JobService, rq_job: RQJob, job_id: str) -> dict[str, Any]:
-    record = jobs.record(job_id)
-    if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
-        return {"skipped": record.get("status", "deleted")}
-    chunk_count = int(record["chunks"])
-    failures = _chunk_failures(jobs, job_id, chunk_count)
-    if failures:
-        _fail(jobs, job_id, "; ".join(failures))
-        return {"failed": failures}
+def _write_final_artifacts(
+    jobs: JobService,
+    rq_job: RQJob,
+    job_id: str,
+    chunk_paths: list[Path],
+    work_dir: Path,
+    scene: Scene | None = None,
+) -> dict[str, Any]:
+    """Merge the chunks' partial sums into the job's artifacts, then its log, scene and manifest, and
+    mark it succeeded (the merge step's bookkeeping is ``merge.<field>``). ``scene``: the job's scene
+    if it was already validated in this process."""
     from worker.render.api import merge_chunks
 
     started_s = time.monotonic()
     jobs.chunk_started(job_id, "merge", rq_job.worker_name or "", os.getpid())
-    with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-merge-") as tmp:
-        work_dir = Path(tmp)
-        scene, _ = _load_inputs(jobs, job_id, work_dir)
-        chunk_paths = []
-        for index in range(chunk_count):
-            path = work_dir / "chunks" / f"{index}.npz"
-            jobs.store.get_file(chunk_key(job_id, index), path)
-            chunk_paths.append(path)
-        out_dir = work_dir / "out"
-        out_dir.mkdir()
-        summary = merge_chunks(scene, chunk_paths, out_dir, extra_summary={"job_id": job_id})
-        for path in sorted(out_dir.rglob("*")):
-            if path.is_file():
-                jobs.store.put_file(f"jobs/{job_id}/{path.relative_to(out_dir).as_posix()}", path)
+    scene_document = jobs.scene(job_id)
+    out_dir = work_dir / "out"
+    out_dir.mkdir()
+    summary = merge_chunks(scene or scene_document, chunk_paths, out_dir, extra_summary={"job_id": job_id})
+    for path in sorted(out_dir.rglob("*")):
+        if path.is_file():
+            jobs.store.put_file(f"jobs/{job_id}/{path.relative_to(out_dir).as_posix()}", path)
     merge_s = time.monotonic() - started_s
     jobs.chunk_finished(job_id, "merge", samples=0, seconds=merge_s)
     jobs.store.put_bytes(f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id))
-    jobs.store.put_bytes(scene_key(job_id), json.dumps(scene, indent=1).encode())  # provenance
+    jobs.store.put_bytes(scene_key(job_id), json.dumps(scene_document, indent=1).encode())  # provenance
     finished_at = time.time()
     # The manifest is complete before the status says succeeded, so a client never misses or races it.
     created_at = float(jobs.record(job_id)["created_at"])

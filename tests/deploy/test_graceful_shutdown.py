@@ -4,8 +4,10 @@ stopping worker; one that does not is handed back to the queue (no retry spent) 
 worker; a second SIGTERM hands it back at once. In every case each chunk and the merge complete exactly
 once and the job has one set of artifacts.
 
-Render lengths follow the service tests' calibration: the Cornell box at 64x64 px takes about spp / 700 s
-on 2 shared cores, so ``spp = 2048`` runs ~3 s and ``spp = 8192`` ~12 s (longer than any grace used here).
+Jobs have two chunks, so that a stopping worker leaves work in the queue for the next one. Render lengths
+follow the service tests' calibration: the Cornell box at 64x64 px takes about spp / 700 s on 2 shared
+cores, so a chunk of a ``spp = 2048`` job runs ~1.5 s and one of a ``spp = 8192`` job ~6 s (longer than
+any grace used here).
 """
 
 from __future__ import annotations
@@ -34,9 +36,10 @@ def job_service(service: LiveService) -> JobService:
 
 
 def submit_rendering(service: LiveService, spp: int) -> tuple[HgrenderClient, str, int]:
-    """Submit a one-chunk Cornell box job and wait until its render loop runs; return the horse pid."""
+    """Submit a two-chunk Cornell box job (``spp`` in all) and wait until chunk 0 renders; return its
+    horse's pid. With one worker, chunk 1 and the merge wait in the queue meanwhile."""
     client = service.client()
-    job_id = client.submit(tiny_scene(size_px=64, spp=spp), chunks=1)["id"]
+    job_id = client.submit(tiny_scene(size_px=64, spp=spp), chunks=2)["id"]
     wait_for(
         lambda: (v := client.get(job_id))["status"] == "running" and v["chunks"][0]["progress"] > 0,
         60,
@@ -57,10 +60,10 @@ def assert_succeeded_exactly_once(
 ) -> dict[str, Any]:
     final = client.wait(job_id, timeout_s=180)
     assert final["status"] == "succeeded", final.get("error")
-    assert job_service(service).chunk_completions(job_id) == {"0": 1, "merge": 1}
+    assert job_service(service).chunk_completions(job_id) == {"0": 1, "1": 1, "merge": 1}
     names = [a["name"] for a in client.artifacts(job_id)]
     assert len(names) == len(set(names)) and names.count("image.exr") == 1
-    assert sorted(n for n in names if n.startswith("chunks/")) == ["chunks/0.npz"]
+    assert sorted(n for n in names if n.startswith("chunks/")) == ["chunks/0.npz", "chunks/1.npz"]
     return final
 
 
@@ -85,7 +88,7 @@ def test_sigterm_lets_the_current_chunk_finish_within_the_grace(service: LiveSer
     client, job_id, _ = submit_rendering(service, spp=2048)
     stopping.send_signal(signal.SIGTERM)  # to the worker only, as Kubernetes signals a container's PID 1
     assert wait_exit(stopping, 60) == 0
-    # The stopping worker finished its chunk but took nothing new (the merge waits in the queue).
+    # The stopping worker finished its chunk but took nothing new (chunk 1 and the merge wait).
     assert job_service(service).chunk_completions(job_id) == {"0": 1}
     assert client.get(job_id)["status"] == "running"
     service.start_worker("merger")

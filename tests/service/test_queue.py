@@ -157,9 +157,9 @@ def _assert_succeeded_exactly_once(
     assert completions == {**{str(i): 1 for i in range(final["chunks_total"])}, "merge": 1}
     names = [a["name"] for a in client.artifacts(job_id)]
     assert len(names) == len(set(names))
-    assert sorted(n for n in names if n.startswith("chunks/")) == [
-        f"chunks/{i}.npz" for i in range(final["chunks_total"])
-    ]
+    # A one-chunk job renders and merges in one work horse: its partial sums never reach the store.
+    partials = [f"chunks/{i}.npz" for i in range(final["chunks_total"])] if final["chunks_total"] > 1 else []
+    assert sorted(n for n in names if n.startswith("chunks/")) == partials
     assert names.count("image.exr") == 1
     store_root = service.settings.artifact_dir / "jobs" / job_id
     assert not [p for p in store_root.rglob(".*")], "temporary files left behind"
@@ -202,6 +202,66 @@ def test_sigkill_of_a_whole_worker_is_detected_and_retried(live_service: LiveSer
     final = _assert_succeeded_exactly_once(service, client, job_id)
     assert final["chunks"][int(index)]["attempts"] == 2
     assert final["chunks"][int(index)]["worker"] == "survivor"
+    service.stop_workers()
+
+
+def _kill_horse_of_attempt(jobs: JobService, job_id: str, attempt: int) -> None:
+    """Wait until attempt ``attempt`` of the one-chunk job renders, then SIGKILL its work horse."""
+    wait_for(
+        lambda: (
+            (f := jobs.chunk_fields(job_id)).get("0.attempts") == str(attempt)
+            and float(f.get("0.progress", 0)) > 0
+        ),
+        60,
+        f"attempt {attempt} to render",
+    )
+    os.kill(int(jobs.chunk_fields(job_id)["0.pid"]), signal.SIGKILL)
+
+
+def test_a_one_chunk_job_whose_horse_dies_on_every_attempt_fails(live_service: LiveService) -> None:
+    """The step that renders and merges a one-chunk job cannot report its own death: the worker fails the
+    job when the last retry's horse dies, and stays up."""
+    service = live_service
+    service.stop_workers()
+    worker = service.start_worker("k1")
+    client = service.client()
+    job_id = client.submit(long_scene(spp=4096), chunks=1)["id"]
+    jobs = job_service(service)
+    for attempt in range(1, 2 + service.settings.chunk_retry_max):
+        _kill_horse_of_attempt(jobs, job_id, attempt)
+    final = client.wait(job_id, timeout_s=60)
+    assert final["status"] == "failed"
+    assert final["error"].startswith(f"render and merge job {job_id}: Work-horse terminated unexpectedly")
+    assert final["chunks"][0]["attempts"] == 1 + service.settings.chunk_retry_max
+    assert "manifest.json" in {a["name"] for a in client.artifacts(job_id)}
+    assert worker.poll() is None
+    service.stop_workers()
+
+
+def test_a_one_chunk_job_whose_worker_dies_on_the_last_attempt_fails(live_service: LiveService) -> None:
+    """Horses killed on the first attempts, then the whole worker on the last: another worker's maintenance
+    pass finds the abandoned step (heartbeat 1 + 3 s) and fails the job instead of leaving it running."""
+    service = live_service
+    service.stop_workers()
+    victim = service.start_worker("victim")
+    client = service.client()
+    job_id = client.submit(long_scene(spp=4096), chunks=1)["id"]
+    jobs = job_service(service)
+    for attempt in range(1, 1 + service.settings.chunk_retry_max):
+        _kill_horse_of_attempt(jobs, job_id, attempt)
+    last = 1 + service.settings.chunk_retry_max
+    wait_for(lambda: jobs.chunk_fields(job_id).get("0.attempts") == str(last), 60, "the last attempt")
+    horse_pid = int(jobs.chunk_fields(job_id)["0.pid"])
+    os.killpg(victim.pid, signal.SIGKILL)
+    os.kill(horse_pid, signal.SIGKILL)
+    victim.wait()
+    service.start_worker("survivor")
+    final = client.wait(job_id, timeout_s=60)
+    assert final["status"] == "failed"
+    assert (
+        final["error"]
+        == f"render and merge job {job_id}: its worker died (heartbeat lapsed) on the last attempt"
+    )
     service.stop_workers()
 
 
