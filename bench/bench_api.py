@@ -7,7 +7,8 @@ Python processes with httpx keep-alive clients. The read and submit phases run o
 workers (so rendering does not compete for the cores); the overhead phase uses a server with one worker
 and submits sequentially a 1x1-pixel, 1-spp, 1-band scene. Its end-to-end time includes the renderer's
 scene compilation and the merge's EXR/PNG writing (``render_s`` + ``merge_s`` of the job's timings);
-``empty_job_queue_share_p50_ms`` is the rest: API, Redis, dequeue, forks, uploads, bookkeeping.
+``empty_job_queue_share_p50_ms`` is the rest: API, Redis, dequeue, fork, uploads, bookkeeping. A 1-spp
+job has one chunk, so it runs as a single RQ job that renders and merges in one work horse.
 Run: ``python -m bench.bench_api`` (or ``python -m bench`` for every benchmark).
 """
 
@@ -32,13 +33,13 @@ from typing import Any
 import httpx
 
 from hgrender.client import HgrenderClient
+from schemas import EXAMPLES_DIR
 from service.redis_server import free_loopback_port
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-SCENE_PATH = REPO_ROOT / "schemas" / "examples" / "cornell_box.json"
+SCENE_PATH = EXAMPLES_DIR / "cornell_box.json"
 LOAD_DURATION_S = 10.0
 CONNECTIONS = 8
-OVERHEAD_JOBS = 30
+OVERHEAD_JOBS = 60
 
 
 def empty_scene() -> dict[str, Any]:
@@ -160,18 +161,20 @@ def load(url: str, token: str, duration_s: float, body: bytes | None = None) -> 
 
 
 def queue_overhead(url: str, token: str, jobs: int) -> dict[str, float]:
-    """Sequential empty jobs: seconds from POST to reading ``succeeded`` (client polls every 5 ms), and
-    the queue's own share of it: total minus the renderer's chunk and merge compute (server timings)."""
+    """Sequential empty jobs: seconds from POST to the client reading ``succeeded`` (it follows the job's
+    events, as ``hgrender submit --wait`` does), and the queue's own share of it: total minus the
+    renderer's chunk and merge compute (server timings)."""
     end_to_end_s, queue_share_s = [], []
     with HgrenderClient(url, token) as client:
         scene = empty_scene()
-        client.wait(client.submit(scene, chunks=1)["id"], timeout_s=120)  # warm the kernel cache
+        client.wait(client.submit(scene)["id"], timeout_s=120)  # warm the kernel cache
         for _ in range(jobs):
             start = time.perf_counter()
-            job_id = client.submit(scene, chunks=1)["id"]
-            while (view := client.get(job_id))["status"] not in {"succeeded", "failed", "canceled"}:
-                time.sleep(0.005)
+            job_id = client.submit(scene)["id"]
+            view = client.wait(job_id, timeout_s=120)
             end_to_end_s.append(time.perf_counter() - start)
+            if view["status"] != "succeeded":
+                raise RuntimeError(f"empty job {job_id} ended {view['status']}: {view.get('error')}")
             timings = view["timings"]
             queue_share_s.append(
                 timings["total_s"] - (timings["render_s"] or 0.0) - (timings["merge_s"] or 0.0)

@@ -39,10 +39,10 @@ from typing import Any
 import numpy as np
 
 from bench.bench_optics import _cpu_model
+from schemas import EXAMPLES_DIR
 from worker.render.output import atomic_write_bytes
 
 RESULTS_PATH = Path(__file__).resolve().parent / "results" / "integrator.json"
-EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "schemas" / "examples"
 CORNELL_SCENE = "cornell_box"
 THIN_FILM_SCENE = "thin_film_sphere_light"
 VARIANT = "llvm_ad_spectral"

@@ -10,8 +10,6 @@ from __future__ import annotations
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-import redis
-import redis.asyncio as aioredis
 from fastapi import FastAPI
 
 from hgrender import __version__
@@ -22,6 +20,7 @@ from service.api.routes import coherence, health, jobs, schemas, tokens, viewer,
 from service.api.routes import schedules as regression_routes
 from service.auth import RequestAuthenticator, TokenRegistry
 from service.core.config import Settings
+from service.core.redis_clients import async_redis_client, redis_client
 from service.jobs import JobService
 from service.metrics import LatencyHistogram
 from service.store import store_from_settings
@@ -60,11 +59,11 @@ def create_app(settings: Settings) -> FastAPI:
             {"name": "regression", "description": "Regression schedules, runs and baselines."},
         ],
     )
-    client = redis.Redis.from_url(settings.redis_url, health_check_interval=30)
+    client = redis_client(settings.redis_url, health_check_interval=30)
     store = store_from_settings(settings)
     app.state.settings = settings
     app.state.redis = client
-    app.state.aredis = aioredis.Redis.from_url(settings.redis_url)
+    app.state.aredis = async_redis_client(settings.redis_url)
     app.state.store = store
     app.state.jobs = JobService(client, store, settings, aclient=app.state.aredis)
     app.state.tokens = TokenRegistry(client)

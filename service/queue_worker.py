@@ -40,6 +40,7 @@ from rq.registry import StartedJobRegistry
 from rq.utils import now
 
 from service.core.config import QUEUE_NAMES, Settings
+from service.core.redis_clients import redis_client
 from service.jobs import FINAL_STEP_TASKS, JobService
 from service.store import store_from_settings
 
@@ -167,7 +168,7 @@ def run_worker(settings: Settings, *, burst: bool = False, name: str | None = No
     """Work the ``high``, ``default`` and ``low`` queues (in that order) until stopped; exit code 0."""
     if not settings.redis_url:
         raise ValueError("redis_url: REDIS_URL must name the Redis server the API uses")
-    client = redis.Redis.from_url(settings.redis_url)
+    client = redis_client(settings.redis_url)
     worker = build_worker(settings, client, name)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     # The worker that holds RQ's scheduler lock also moves retries whose backoff has elapsed back to queues.

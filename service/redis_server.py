@@ -15,6 +15,8 @@ from pathlib import Path
 
 import redis
 
+from service.core.redis_clients import redis_client
+
 
 def free_loopback_port() -> int:
     """A TCP port on 127.0.0.1 that is free right now."""
@@ -61,7 +63,7 @@ class RedisServer:
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.process = subprocess.Popen(self.command(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         deadline = time.monotonic() + timeout_s
-        client = redis.Redis.from_url(self.url, socket_connect_timeout=0.5)
+        client = redis_client(self.url, socket_connect_timeout=0.5)
         try:
             while time.monotonic() < deadline:
                 if self.process.poll() is not None:

@@ -12,6 +12,9 @@ A one-chunk job runs both in one work horse and keeps its partial sums local.
 
 from __future__ import annotations
 
+import atexit
+import ctypes
+import functools
 import gc
 import hashlib
 import json
@@ -20,58 +23,96 @@ import tempfile
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rq import get_current_job
 from rq.exceptions import NoSuchJobError
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
+from schemas import EXAMPLES_DIR, validate_scene
 from schemas.scene import MAX_FILM_MODES, Scene
 from service.core.config import Settings
 from service.jobs import JobService, chunk_key, chunk_rq_id, scene_key
 from service.models import TERMINAL_STATUSES, JobStatus
 from service.store import store_from_settings
+from worker.render.pixel_sums import PixelSums
+
+if TYPE_CHECKING:
+    from worker.render.api import RenderedChunk
 
 CANCEL_POLL_INTERVAL_S = 0.5
 """How often a running chunk re-reads its job's status (a cancel stops it within this plus one pass)."""
 
 
 def preload_renderer() -> None:
-    """Import the renderer and its image writers in the worker's main process, so that every forked
-    work horse starts with them loaded (saves ~0.7 s per chunk and ~0.3 s per merge). Only imports:
-    no Dr.Jit backend is initialised here, because its LLVM thread pool or CUDA context would not
-    survive the fork."""
+    """Load, in the worker's main process, what every forked work horse would otherwise load again for
+    each job: the renderer's modules and Mitsuba's plugins, the image writers, data tables and caches
+    (together ~1 s for a horse's first chunk, and still ~30 ms per job once the modules are imported).
+    No Dr.Jit backend is initialised here: its LLVM thread pool or CUDA context would not survive the
+    fork. Then the collector is told to leave the loaded objects alone."""
+    _load_libraries()
+    _fill_caches()
+    # Objects that exist now are left alone by the collector, so a horse's garbage collections do not
+    # copy the worker's memory pages (copy-on-write) that it would otherwise only read. Unfrozen at exit,
+    # so that the interpreter's last collection still finalises them.
+    gc.freeze()
+    atexit.register(gc.unfreeze)
+
+
+def _load_libraries() -> None:
     from worker.mitsuba_setup import find_libllvm
 
     # As load_mitsuba() does: Dr.Jit must see libLLVM 19 before it is first imported.
     libllvm = find_libllvm()
     if "DRJIT_LIBLLVM_PATH" not in os.environ and libllvm is not None:
         os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
-    import mitsuba  # noqa: F401
+    import mitsuba
     import OpenImageIO  # noqa: F401  (EXR writing, imported lazily by the merge step)
     import PIL.Image  # (preview PNG, idem)
 
     PIL.Image.init()  # registers the image plugins now, not at the first save in each horse (~20 ms)
 
     import worker.render.api  # noqa: F401
+
+    # Mitsuba loads each plugin (a shared library: shapes, emitters, films, ...) on its first use in a
+    # process. Loaded here, every horse finds them resident (~10 ms per job); loading starts no threads.
+    for plugin in sorted((Path(mitsuba.__file__).parent / "plugins").glob("*.so")):
+        ctypes.CDLL(str(plugin))
+
+
+def _fill_caches() -> None:
+    from worker.optics import ior, spectra
     from worker.optics.sources import source_coefficients
 
-    for modes in range(1, MAX_FILM_MODES + 1):  # the renderer's disk and rectangle expansions (~3 ms each)
+    # The renderer's disk and rectangle source expansions (~3 ms each).
+    for modes in range(1, MAX_FILM_MODES + 1):
         source_coefficients("disk", modes)
         source_coefficients("rect", modes)
-    # Objects that exist now are left alone by the collector, so a horse's garbage collections do not
-    # copy the worker's memory pages (copy-on-write) that it would otherwise only read.
-    gc.freeze()
+    # Data tables: CIE colour matching functions, illuminants, metals' refractive indices.
+    spectra.cie_cmf(550.0)
+    for illuminant in spectra.ILLUMINANTS:
+        spectra.cie_illuminant(illuminant, 550.0)
+    for metal in ior.METALS:
+        ior.metal_table(metal)
+    # The first validation in a process fills pydantic's and abc's caches (~5 ms).
+    for example in sorted(EXAMPLES_DIR.glob("*.json")):
+        validate_scene(json.loads(example.read_text()))
+    task_settings()
+
+
+@functools.cache
+def task_settings() -> Settings:
+    """The worker's settings (its environment), read once per worker process and inherited by horses."""
+    return Settings()
 
 
 def _context() -> tuple[JobService, RQJob]:
     rq_job = get_current_job()
     if rq_job is None:
         raise RuntimeError("worker.tasks functions run inside an RQ work horse (hgrender worker)")
-    settings = Settings()
+    settings = task_settings()
     return JobService(rq_job.connection, store_from_settings(settings), settings), rq_job
 
 
@@ -131,29 +172,21 @@ def _step(name: str) -> Iterator[None]:
         raise StepFailedError(f"{name}: {type(error).__name__}: {error}") from error
 
 
-@dataclass(frozen=True)
-class RenderedChunk:
-    path: Path  # its partial sums (.npz)
-    result: dict[str, Any]  # ``worker.render.api.render_chunk``'s
-    scene: Scene  # as validated for the render
-
-
 def _render_chunk(
     jobs: JobService, rq_job: RQJob, job_id: str, record: dict[str, str], chunk_index: int, work_dir: Path
-) -> RenderedChunk | None:
-    """Render one chunk into ``work_dir``, or return None when the job was canceled meanwhile."""
-    from worker.render.api import as_scene, plan_chunks, render_chunk
+) -> tuple[RenderedChunk, Scene] | None:
+    """Render one chunk (its sums in memory) and return it with the validated scene, or None when the job
+    was canceled meanwhile. Bundle inputs are copied to ``work_dir``."""
+    from worker.render.api import as_scene, plan_chunks, render_chunk_sums
 
     chunk = plan_chunks(int(record["spp"]), int(record["chunks"]), int(record["seed"]))[chunk_index]
     jobs.chunk_started(job_id, chunk_index, rq_job.worker_name or "", os.getpid(), chunk.spp)
     should_stop = _CancelPoll(jobs, job_id)
     scene_document, bundle_dir = _load_inputs(jobs, job_id, work_dir)
     scene = as_scene(scene_document)
-    out_path = work_dir / f"chunk-{chunk_index}.npz"
-    result = render_chunk(
+    rendered = render_chunk_sums(
         scene,
         chunk,
-        out_path,
         progress=_ProgressReporter(jobs, job_id, chunk_index, jobs.settings.progress_interval_s),
         should_stop=should_stop,
         bundle_dir=bundle_dir,
@@ -161,7 +194,7 @@ def _render_chunk(
     if should_stop(force=True):
         jobs.set_chunk_status(job_id, chunk_index, "canceled")
         return None
-    return RenderedChunk(out_path, result, scene)
+    return rendered, scene
 
 
 def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
@@ -170,14 +203,18 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
     record = jobs.record(job_id)
     if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
         return {"skipped": record.get("status", "deleted")}
+    from worker.render.api import save_chunk
+
     with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-{chunk_index}-") as tmp:
-        rendered = _render_chunk(jobs, rq_job, job_id, record, chunk_index, Path(tmp))
-        if rendered is None:
+        outcome = _render_chunk(jobs, rq_job, job_id, record, chunk_index, Path(tmp))
+        if outcome is None:
             return {"canceled": True}
-        jobs.store.put_file(chunk_key(job_id, chunk_index), rendered.path)
-    samples, seconds = int(rendered.result["samples"]), float(rendered.result["seconds"])
-    jobs.chunk_finished(job_id, chunk_index, samples, seconds)
-    return {"samples": samples, "seconds": seconds}
+        rendered, _ = outcome
+        partial_path = Path(tmp) / f"chunk-{chunk_index}.npz"
+        save_chunk(rendered, partial_path)
+        jobs.store.put_file(chunk_key(job_id, chunk_index), partial_path)
+    jobs.chunk_finished(job_id, chunk_index, rendered.samples, rendered.seconds)
+    return {"samples": rendered.samples, "seconds": rendered.seconds}
 
 
 def render_job_task(job_id: str) -> dict[str, Any]:
@@ -191,13 +228,16 @@ def render_job_task(job_id: str) -> dict[str, Any]:
         with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-") as tmp:
             work_dir = Path(tmp)
             with _step("chunk 0"):
-                rendered = _render_chunk(jobs, rq_job, job_id, record, 0, work_dir)
-            if rendered is None:
+                outcome = _render_chunk(jobs, rq_job, job_id, record, 0, work_dir)
+            if outcome is None:
                 return {"canceled": True}
-            result = rendered.result
-            jobs.chunk_finished(job_id, 0, int(result["samples"]), float(result["seconds"]))
+            rendered, scene = outcome
+            jobs.chunk_finished(job_id, 0, rendered.samples, rendered.seconds)
             with _step("merge"):
-                return _write_final_artifacts(jobs, rq_job, job_id, [rendered.path], work_dir, rendered.scene)
+                started_s = _merge_started(jobs, rq_job, job_id)
+                return _write_final_artifacts(
+                    jobs, job_id, work_dir, [rendered.sums], rendered.seconds, started_s, scene
+                )
     except StepFailedError as error:
         _fail_on_last_attempt(jobs, rq_job, job_id, str(error))
         raise
@@ -305,37 +345,49 @@ def merge_task(job_id: str) -> dict[str, Any]:
             _fail(jobs, job_id, "; ".join(failures))
             return {"failed": failures}
         with _step("merge"), tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-merge-") as tmp:
+            from worker.render.api import load_chunk
+
+            started_s = _merge_started(jobs, rq_job, job_id)
             work_dir = Path(tmp)
-            chunk_paths = []
+            chunk_sums, render_seconds = [], 0.0
             for index in range(chunk_count):
                 path = work_dir / "chunks" / f"{index}.npz"
                 jobs.store.get_file(chunk_key(job_id, index), path)
-                chunk_paths.append(path)
-            return _write_final_artifacts(jobs, rq_job, job_id, chunk_paths, work_dir)
+                sums, seconds = load_chunk(path)
+                chunk_sums.append(sums)
+                render_seconds += seconds
+            return _write_final_artifacts(jobs, job_id, work_dir, chunk_sums, render_seconds, started_s)
     except StepFailedError as error:
         _fail_on_last_attempt(jobs, rq_job, job_id, str(error))
         raise
 
 
+def _merge_started(jobs: JobService, rq_job: RQJob, job_id: str) -> float:
+    """Record the merge step as running; its start on the monotonic clock (seconds)."""
+    jobs.chunk_started(job_id, "merge", rq_job.worker_name or "", os.getpid())
+    return time.monotonic()
+
+
 def _write_final_artifacts(
     jobs: JobService,
-    rq_job: RQJob,
     job_id: str,
-    chunk_paths: list[Path],
     work_dir: Path,
+    chunk_sums: list[PixelSums],
+    render_seconds: float,
+    started_s: float,
     scene: Scene | None = None,
 ) -> dict[str, Any]:
-    """Merge the chunks' partial sums into the job's artifacts, then its log, scene and manifest, and
-    mark it succeeded (the merge step's bookkeeping is ``merge.<field>``). ``scene``: the job's scene
-    if it was already validated in this process."""
-    from worker.render.api import merge_chunks
+    """Merge the chunks' sums into the job's artifacts, then its log, scene and manifest, and mark it
+    succeeded (the merge step's bookkeeping is ``merge.<field>``, timed from ``started_s``). ``scene``:
+    the job's scene if it was already validated in this process."""
+    from worker.render.api import write_merged
 
-    started_s = time.monotonic()
-    jobs.chunk_started(job_id, "merge", rq_job.worker_name or "", os.getpid())
     scene_document = jobs.scene(job_id)
     out_dir = work_dir / "out"
     out_dir.mkdir()
-    summary = merge_chunks(scene or scene_document, chunk_paths, out_dir, extra_summary={"job_id": job_id})
+    summary = write_merged(
+        scene or scene_document, chunk_sums, render_seconds, out_dir, extra_summary={"job_id": job_id}
+    )
     for path in sorted(out_dir.rglob("*")):
         if path.is_file():
             jobs.store.put_file(f"jobs/{job_id}/{path.relative_to(out_dir).as_posix()}", path)

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from hgrender.cli import CliError
+from service.core.redis_clients import redis_client
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 
@@ -139,7 +140,6 @@ def _exit_on_signal(signum: int, _frame: object) -> None:
 
 
 def serve_command(args: argparse.Namespace) -> int:
-    import redis
     import uvicorn
 
     from service.auth import ensure_admin_token
@@ -159,7 +159,7 @@ def serve_command(args: argparse.Namespace) -> int:
         settings = settings.model_copy(update={"redis_url": redis_server.url})
     try:
         if settings.auth_enabled:
-            client = redis.Redis.from_url(settings.redis_url)
+            client = redis_client(settings.redis_url)
             ensure_admin_token(client, data_dir / "admin.token")
             client.close()
             print(f"admin token: {data_dir / 'admin.token'}", file=sys.stderr)

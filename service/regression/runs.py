@@ -23,8 +23,7 @@ import redis
 from rq import Queue, get_current_job
 from rq.job import Dependency
 
-import schemas
-from schemas import validate_scene
+from schemas import EXAMPLES_DIR, validate_scene
 from service.core.config import Settings
 from service.jobs import JobService, merge_rq_id
 from service.models import JobStatus
@@ -35,7 +34,6 @@ from service.regression.store import BASELINE_FILES, RegressionStore
 from service.regression.webhooks import deliver_webhook
 from service.store import store_from_settings
 
-EXAMPLES_DIR = Path(schemas.__file__).resolve().parent / "examples"
 EVALUATE_TASK = "service.regression.runs.evaluate_run_task"
 EVALUATE_QUEUE = "default"
 

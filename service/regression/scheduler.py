@@ -38,6 +38,7 @@ from apscheduler.triggers.interval import IntervalTrigger
 from redis.connection import parse_url
 
 from service.core.config import Settings
+from service.core.redis_clients import redis_client
 from service.regression.models import ScheduleView
 from service.regression.runs import RunService, run_service_for
 from service.regression.store import RegressionStore
@@ -136,7 +137,7 @@ class RegressionScheduler:
             raise ValueError("redis_url: the scheduler needs the deployment's Redis (REDIS_URL)")
         self.settings = settings
         self.name = name or f"scheduler-{uuid.uuid4().hex[:8]}"
-        self.client = redis.Redis.from_url(settings.redis_url)
+        self.client = redis_client(settings.redis_url)
         self.runs = run_service_for(self.client, settings)
         self.regression: RegressionStore = self.runs.regression
         self.ttl_ms = int(settings.regression_leader_ttl_s * 1000)

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 from typing import Any
 
-EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "schemas" / "examples"
+from schemas import EXAMPLES_DIR
 
 
 def example(name: str, **film: Any) -> dict[str, Any]:

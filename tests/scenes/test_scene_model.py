@@ -15,11 +15,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from schemas import SceneError, SceneLimits, validate_scene, validate_scene_json
+from schemas import EXAMPLES_DIR, SceneError, SceneLimits, validate_scene, validate_scene_json
 from schemas.export import SCHEMA_PATH, render_schema_text, scene_json_schema
 from schemas.scene import GratingMaterial, PerspectiveCamera, Transform
 
-EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "schemas" / "examples"
 EXAMPLE_PATHS = sorted(EXAMPLES_DIR.glob("*.json"))
 EXPECTED_EXAMPLES = {
     "cornell_box.json",

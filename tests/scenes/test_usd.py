@@ -10,14 +10,13 @@ import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
-from schemas import Scene, SceneError, validate_scene
+from schemas import EXAMPLES_DIR, Scene, SceneError, validate_scene
 from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_scale
 from schemas.scene import BlackbodySpectrum, MeshShape, RoughConductorMaterial, SphereShape, ThinFilmMaterial
 from schemas.usd_export import scene_to_usd
 from schemas.usd_import import import_usd, import_usd_isolated
 from worker.optics.spectra import cie_cmf, planck_radiance
 
-EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "schemas" / "examples"
 EXAMPLE_PATHS = sorted(EXAMPLES_DIR.glob("*.json"))
 
 

@@ -17,12 +17,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
-from schemas import Scene, SceneError, SceneLimits, validate_scene
+from schemas import EXAMPLES_DIR, Scene, SceneError, SceneLimits, validate_scene
 from schemas.mesh_files import load_scene_meshes, read_mesh_file
 from schemas.usd_export import scene_to_usd
 from schemas.usd_import import import_usd_isolated
 
-EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "schemas" / "examples"
 TIMEOUT_S = 60.0
 
 

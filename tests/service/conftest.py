@@ -22,13 +22,13 @@ import uvicorn
 
 from hgrender.cli.service import worker_command_line
 from hgrender.client import HgrenderClient
+from schemas import EXAMPLES_DIR
 from service.auth import TokenRegistry
 from service.core.config import Settings
 from service.main import create_app
 from service.redis_server import free_loopback_port
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
-EXAMPLES_DIR = REPO_ROOT / "schemas" / "examples"
 
 
 def tiny_scene(name: str = "cornell_box.json", size_px: int = 16, spp: int = 4) -> dict[str, Any]:

@@ -73,6 +73,58 @@ def renderer_for(scene: Scene, bundle_dir: Path | None = None) -> Renderer:
     return _renderers[key]
 
 
+@dataclass(frozen=True)
+class RenderedChunk:
+    """One chunk's per-pixel sums and how long its render took (seconds, wall clock)."""
+
+    chunk: ChunkSpec
+    sums: PixelSums
+    seconds: float
+    pixels: int
+
+    @property
+    def samples(self) -> int:
+        return self.chunk.spp * self.pixels
+
+    def result(self) -> dict[str, Any]:
+        return {
+            "index": self.chunk.index,
+            "spp": self.chunk.spp,
+            "samples": self.samples,
+            "seconds": self.seconds,
+            "samples_per_second": self.samples / self.seconds if self.seconds > 0 else None,
+        }
+
+
+def render_chunk_sums(
+    scene: Scene | dict[str, Any],
+    chunk: ChunkSpec,
+    *,
+    progress: ProgressCallback | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    bundle_dir: Path | None = None,
+) -> RenderedChunk:
+    """Render one chunk and keep its per-pixel sums in memory."""
+    parsed = as_scene(scene)
+    start = time.perf_counter()
+    renderer = renderer_for(parsed, bundle_dir)
+    sums = renderer.render_sums(chunk.spp, chunk.seed, progress=progress, should_stop=should_stop)
+    return RenderedChunk(chunk, sums, time.perf_counter() - start, renderer.width * renderer.height)
+
+
+def save_chunk(rendered: RenderedChunk, out_path: Path) -> None:
+    """Write a chunk's sums to ``out_path`` (.npz, atomic), the partial that ``merge_chunks`` adds up."""
+    buffer = io.BytesIO()
+    np.savez(  # uncompressed: zlib on float data costs more than it saves
+        buffer,
+        **rendered.sums.to_arrays(),
+        seconds=np.array(rendered.seconds),
+        chunk_index=np.array(rendered.chunk.index),
+        seed=np.array(rendered.chunk.seed),
+    )
+    atomic_write_bytes(Path(out_path), buffer.getvalue())
+
+
 def render_chunk(
     scene: Scene | dict[str, Any],
     chunk: ChunkSpec,
@@ -83,28 +135,11 @@ def render_chunk(
     bundle_dir: Path | None = None,
 ) -> dict[str, Any]:
     """Render one chunk and write its per-pixel sums to ``out_path`` (.npz, atomic)."""
-    parsed = as_scene(scene)
-    start = time.perf_counter()
-    renderer = renderer_for(parsed, bundle_dir)
-    sums = renderer.render_sums(chunk.spp, chunk.seed, progress=progress, should_stop=should_stop)
-    seconds = time.perf_counter() - start
-    buffer = io.BytesIO()
-    np.savez(  # uncompressed: zlib on float data costs more than it saves
-        buffer,
-        **sums.to_arrays(),
-        seconds=np.array(seconds),
-        chunk_index=np.array(chunk.index),
-        seed=np.array(chunk.seed),
+    rendered = render_chunk_sums(
+        scene, chunk, progress=progress, should_stop=should_stop, bundle_dir=bundle_dir
     )
-    atomic_write_bytes(Path(out_path), buffer.getvalue())
-    samples = chunk.spp * renderer.width * renderer.height
-    return {
-        "index": chunk.index,
-        "spp": chunk.spp,
-        "samples": samples,
-        "seconds": seconds,
-        "samples_per_second": samples / seconds if seconds > 0 else None,
-    }
+    save_chunk(rendered, out_path)
+    return rendered.result()
 
 
 def load_chunk(path: Path) -> tuple[PixelSums, float]:
@@ -121,16 +156,34 @@ def merge_chunks(
     extra_summary: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Add the chunks' sums and write image.exr, variance.exr, preview.png and summary.json."""
-    parsed = as_scene(scene)
     if not chunk_paths:
         raise ValueError("chunk_paths: at least one chunk is needed")
-    total: PixelSums | None = None
-    render_seconds = 0.0
-    for path in sorted(chunk_paths, key=lambda p: str(p)):
-        sums, seconds = load_chunk(Path(path))
-        total = sums if total is None else total.add(sums)
-        render_seconds += seconds
-    assert total is not None
+    loaded = [load_chunk(Path(path)) for path in sorted(chunk_paths, key=lambda p: str(p))]
+    return write_merged(
+        scene,
+        [sums for sums, _ in loaded],
+        sum(seconds for _, seconds in loaded),
+        out_dir,
+        extra_summary=extra_summary,
+    )
+
+
+def write_merged(
+    scene: Scene | dict[str, Any],
+    chunk_sums: Sequence[PixelSums],
+    render_seconds: float,
+    out_dir: Path,
+    *,
+    extra_summary: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Add chunks' sums (in memory) and write image.exr, variance.exr, preview.png and summary.json.
+    ``render_seconds``: the chunks' render time, summed."""
+    parsed = as_scene(scene)
+    if not chunk_sums:
+        raise ValueError("chunk_sums: at least one chunk is needed")
+    total = chunk_sums[0]
+    for sums in chunk_sums[1:]:
+        total = total.add(sums)
     from worker.render.spectral import BandLayout
 
     film = parsed.film
@@ -150,7 +203,7 @@ def merge_chunks(
         "band_centers_nm": bands.centers_nm.tolist(),
         "modes": film.modes,
         "max_depth": film.max_depth,
-        "chunks": len(chunk_paths),
+        "chunks": len(chunk_sums),
         "variant": load_mitsuba().variant(),
         "render_seconds": render_seconds,
         "samples": samples,

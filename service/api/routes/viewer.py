@@ -9,7 +9,6 @@ decoded-image cache (``app.state.viewer_images``).
 from __future__ import annotations
 
 import json
-from pathlib import Path as FilePath
 from typing import Annotated, Any
 
 from fastapi import APIRouter, FastAPI, Path, Query, Response
@@ -17,8 +16,8 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 
-import schemas
 from hgrender.imaging import TONE_MAPS
+from schemas import EXAMPLES_DIR
 from service.api.deps import JobsDep, Reader, visible_job
 from service.api.routes.jobs import _ERRORS, JobId
 from service.jobs import JobConflictError
@@ -39,7 +38,6 @@ from service.viewer_data import (
 )
 
 router = APIRouter(tags=["viewer"])
-EXAMPLES_DIR = FilePath(schemas.__file__).parent / "examples"
 _IMAGE_ERRORS: dict[int | str, dict[str, Any]] = {
     **_ERRORS,
     409: {"model": Problem, "description": "The job has no image yet (not finished)."},
