@@ -26,6 +26,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from rq import get_current_job
 from rq.exceptions import NoSuchJobError
 from rq.job import Job as RQJob
@@ -75,6 +76,11 @@ def _load_libraries() -> None:
     PIL.Image.init()  # registers the image plugins now, not at the first save in each horse (~20 ms)
 
     import worker.render.api  # noqa: F401
+    from worker.render.output import preview_png
+
+    preview_png(np.zeros((1, 1, 3)))  # PIL's first PNG encoding (~2 ms); zlib starts no threads
+    # Not so OpenImageIO: its first image output starts a thread pool that a forked horse would lack
+    # (the horse's EXR writes then hang), so its ~2 ms first-use cost stays in each horse.
 
     # Mitsuba loads each plugin (a shared library: shapes, emitters, films, ...) on its first use in a
     # process. Loaded here, every horse finds them resident (~10 ms per job); loading starts no threads.
