@@ -9,7 +9,8 @@ and submits sequentially a 1x1-pixel, 1-spp, 1-band scene. Its end-to-end time i
 scene compilation and the merge's EXR/PNG writing (``render_s`` + ``merge_s`` of the job's timings);
 ``empty_job_queue_share_p50_ms`` is the rest: API, Redis, dequeue, fork, uploads, bookkeeping. A 1-spp
 job has one chunk, so it runs as a single RQ job that renders and merges in one work horse.
-Run: ``python -m bench.bench_api`` (or ``python -m bench`` for every benchmark).
+Run: ``python -m bench.bench_api`` (or ``python -m bench`` for every benchmark); results also go to
+``bench/results/api.json``. ``cpu_reference_s`` tells how fast the (shared) machine was during the run.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from typing import Any
 
 import httpx
 
+from bench.machine import cpu_model, cpu_reference_s, write_results
 from hgrender.client import HgrenderClient
 from schemas import EXAMPLES_DIR
 from service.redis_server import free_loopback_port
@@ -188,6 +190,7 @@ def queue_overhead(url: str, token: str, jobs: int) -> dict[str, float]:
 
 
 def main() -> dict[str, Any]:
+    reference_before_s = cpu_reference_s()
     with tempfile.TemporaryDirectory(prefix="hgrender-bench-") as tmp:
         with serve(Path(tmp) / "api", workers=0) as (url, token):
             with HgrenderClient(url, token) as client:
@@ -197,7 +200,10 @@ def main() -> dict[str, Any]:
             submit = load(f"{url}/v1/jobs", token, LOAD_DURATION_S, body)
         with serve(Path(tmp) / "queue", workers=1) as (url, token):
             overhead = queue_overhead(url, token, OVERHEAD_JOBS)
-    return {
+    results = {
+        "cpu": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "cpu_reference_s": [reference_before_s, cpu_reference_s()],  # before and after the phases
         "load_generator": "wrk" if get["tool"] else "python-httpx",
         "connections": CONNECTIONS,
         "get_job_requests_per_s": get["requests_per_s"],
@@ -217,6 +223,8 @@ def main() -> dict[str, Any]:
             "empty_job_overhead_p50_ms": "< 100",
         },
     }
+    write_results("api", results)
+    return results
 
 
 if __name__ == "__main__":

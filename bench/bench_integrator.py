@@ -38,11 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from bench.bench_optics import _cpu_model
+from bench.machine import cpu_model, cpu_reference_s, write_results
 from schemas import EXAMPLES_DIR
-from worker.render.output import atomic_write_bytes
 
-RESULTS_PATH = Path(__file__).resolve().parent / "results" / "integrator.json"
 CORNELL_SCENE = "cornell_box"
 THIN_FILM_SCENE = "thin_film_sphere_light"
 VARIANT = "llvm_ad_spectral"
@@ -234,7 +232,8 @@ def main(quick: bool = False, repeats: int = REPEATS) -> dict[str, Any]:
     results: dict[str, Any] = {
         "variant": VARIANT,
         "drjit_version": dr.__version__,
-        "cpu": _cpu_model(),
+        "cpu": cpu_model(),
+        "cpu_reference_s": cpu_reference_s(),
         "cpu_count": os.cpu_count(),
         "python": platform.python_version(),
         "resolution_px": [RESOLUTION_PX, RESOLUTION_PX],
@@ -244,7 +243,7 @@ def main(quick: bool = False, repeats: int = REPEATS) -> dict[str, Any]:
         **measure_speed(repeats),
     }
     results["memory"] = None if quick else measure_memory()
-    atomic_write_bytes(RESULTS_PATH, (json.dumps(results, indent=2) + "\n").encode())
+    write_results("integrator", results)
     return results
 
 

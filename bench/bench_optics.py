@@ -22,17 +22,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import platform
 import sys
-import tempfile
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from bench.machine import cpu_model, cpu_reference_s, write_results
 from worker.mitsuba_setup import load_mitsuba
 from worker.optics.coherence import degree_of_coherence
 from worker.optics.complex_pair import ComplexPair
@@ -40,7 +37,6 @@ from worker.optics.grating import CD_GRATING, grating_eval
 from worker.optics.sources import source_coefficients
 from worker.optics.thin_film import gaussian_visibilities, thin_film_reflectance
 
-RESULTS_PATH = Path(__file__).resolve().parent / "results" / "optics.json"
 SAMPLE_COUNT = 10_000_000
 WARM_REPEATS = 3
 TARGET_0TH_PER_S = 1e7
@@ -129,7 +125,8 @@ def main(count: int = SAMPLE_COUNT, repeats: int = WARM_REPEATS) -> dict[str, An
         "backend": "drjit-llvm",
         "drjit_version": dr.__version__,
         "threads": 1,
-        "cpu": _cpu_model(),
+        "cpu": cpu_model(),
+        "cpu_reference_s": cpu_reference_s(),
         "samples": count,
         "thin_film_0th_mode": {**zeroth, "beams": FILM_BEAMS, "target_per_s": TARGET_0TH_PER_S},
         "thin_film_16_modes": {**sixteen, "beams": FILM_BEAMS, "target_per_s": TARGET_16_PER_S},
@@ -138,28 +135,8 @@ def main(count: int = SAMPLE_COUNT, repeats: int = WARM_REPEATS) -> dict[str, An
     results["targets_met"] = (
         zeroth["evaluations_per_s"] >= TARGET_0TH_PER_S and sixteen["evaluations_per_s"] >= TARGET_16_PER_S
     )
-    _write_json_atomically(RESULTS_PATH, results)
+    write_results("optics", results)
     return results
-
-
-def _cpu_model() -> str:
-    """The CPU model name from /proc/cpuinfo (Linux), else the platform's processor string."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def _write_json_atomically(path: Path, payload: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(handle, "w", encoding="utf-8") as stream:
-        json.dump(payload, stream, indent=2)
-        stream.write("\n")
-    os.replace(temporary, path)
 
 
 if __name__ == "__main__":

@@ -24,10 +24,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench.machine import cpu_model, cpu_reference_s, write_results
 from hgrender.client import HgrenderClient
-
-ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results" / "scaleout.json"
+from schemas import EXAMPLES_DIR
 
 
 def _free_port() -> int:
@@ -37,7 +36,7 @@ def _free_port() -> int:
 
 
 def _scene(size_px: int, spp: int) -> dict[str, Any]:
-    scene = json.loads((ROOT / "schemas" / "examples" / "cornell_box.json").read_text())
+    scene = json.loads((EXAMPLES_DIR / "cornell_box.json").read_text())
     scene["film"] = {**scene["film"], "width": size_px, "height": size_px, "spp": spp}
     return scene
 
@@ -116,13 +115,14 @@ def main(
         run["efficiency"] = run["jobs_per_hour"] / (baseline * run["workers"])
     result = {
         "cores": os.cpu_count(),
+        "cpu": cpu_model(),
+        "cpu_reference_s": cpu_reference_s(),
         "scene": f"cornell_box {size_px}x{size_px}, {spp} spp, {chunks} chunks per job",
         "runs": runs,
         "goal": "efficiency >= 0.9 while workers <= cores",
         "goal_met": all(run["efficiency"] >= 0.9 for run in runs if run["workers"] <= (os.cpu_count() or 1)),
     }
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2))
+    write_results("scaleout", result)
     return result
 
 

@@ -1,0 +1,50 @@
+"""What every benchmark records about the machine it ran on, and where it writes its results.
+
+The machines these benchmarks run on are shared virtual machines whose speed drifts with the host's load
+(by up to 2x within an hour on the 2-core development VM). Every result therefore carries
+``cpu_reference_s``: the time of a fixed single-threaded Python workload, measured with the benchmark.
+Compare figures across runs only where it is similar; compare versions within one run (or session).
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+from pathlib import Path
+from typing import Any
+
+from worker.render.output import atomic_write_bytes
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+REFERENCE_ITERATIONS = 2_000_000
+
+
+def cpu_model() -> str:
+    """The CPU model name from /proc/cpuinfo (Linux), else the platform's processor string."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def cpu_reference_s(repeats: int = 3) -> float:
+    """Seconds for a fixed pure-Python loop (``REFERENCE_ITERATIONS`` additions), best of ``repeats``."""
+    best_s = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        total = 0
+        for value in range(REFERENCE_ITERATIONS):
+            total += value
+        best_s = min(best_s, time.perf_counter() - start)
+    return best_s
+
+
+def write_results(name: str, results: dict[str, Any]) -> Path:
+    """Write ``results`` to ``bench/results/<name>.json`` (atomically) and return the path."""
+    path = RESULTS_DIR / f"{name}.json"
+    atomic_write_bytes(path, (json.dumps(results, indent=2) + "\n").encode())
+    return path
