@@ -48,7 +48,9 @@ test: setup lint
 test-fast: venv
 	$(VENV)/bin/pytest -q -m "not slow and not browser"
 
+# The API benchmark drives the server with wrk (it falls back to Python load processes without it).
 bench: setup
+	@$(MAKE) --no-print-directory system-packages SYSTEM_PACKAGES=wrk
 	$(PY) -m bench
 
 clean:
