@@ -385,8 +385,10 @@ def test_narrow_viewport_has_no_horizontal_overflow(
 def test_cancel_and_delete_from_the_job_list(page: Any, served: Served) -> None:
     from tests.web.conftest import cylinder_scene
 
-    # Large enough (64×64 px × 256 spp on one worker) to still be queued or running when canceled.
-    job_id = served.client.submit(cylinder_scene(width=64, height=64, spp=256), name="to cancel")["id"]
+    # Long enough to be still queued or running whenever the click comes: 64×64 px × 16384 spp on one
+    # worker renders for tens of seconds (256 spp took under a second once small jobs got faster);
+    # canceled, it stops within a render pass.
+    job_id = served.client.submit(cylinder_scene(width=64, height=64, spp=16384), name="to cancel")["id"]
     page.goto(f"{served.base_url}/#/jobs")
     row = f'tr[data-job-id="{job_id}"]'
     page.wait_for_selector(row)
