@@ -30,6 +30,7 @@ import logging
 import socket
 import uuid
 from types import FrameType
+from typing import Any
 
 import redis
 from rq import Queue, Worker
@@ -47,18 +48,25 @@ from service.store import store_from_settings
 
 class RenderWorker(Worker):
     """An RQ ``Worker`` with a configurable heartbeat grace and maintenance wake-up, whose warm shutdown
-    hands its chunk back to the queue after ``shutdown_grace_s``."""
+    hands its chunk back to the queue after ``worker_shutdown_grace_s``, and which fails the job of a final
+    step that died (both from ``settings``)."""
 
-    heartbeat_grace_s: int = 60
-    shutdown_grace_s: int = 40
-    settings: Settings | None = None  # for failing jobs whose final step died (set by build_worker)
     _handing_back_job_id: str | None = None
+
+    def __init__(
+        self, queues: list[Queue], *args: Any, settings: Settings | None = None, **options: Any
+    ) -> None:
+        super().__init__(queues, *args, **options)
+        # RQ rebuilds workers from their Redis key with its own arguments only (``Worker.all``, ``rq info``):
+        # those read the settings from the environment.
+        self.settings = settings if settings is not None else Settings()
+        self.push_exc_handler(self.handle_abandoned_final_step)
 
     def get_heartbeat_ttl(self, job: Job, working_time: float = 0.0) -> int:
         monitoring_s = self.job_monitoring_interval
         if job.timeout and job.timeout > 0:
             monitoring_s = int(min(job.timeout - working_time, monitoring_s))
-        return int(monitoring_s) + self.heartbeat_grace_s
+        return int(monitoring_s) + self.settings.worker_heartbeat_grace_s
 
     @property
     def dequeue_timeout(self) -> int:
@@ -72,7 +80,7 @@ class RenderWorker(Worker):
         if not self._stop_requested or self._shutdown_requested_date is None:
             return
         waited_s = (now() - self._shutdown_requested_date).total_seconds()
-        if waited_s >= self.shutdown_grace_s and self._handing_back_job_id is None:
+        if waited_s >= self.settings.worker_shutdown_grace_s and self._handing_back_job_id is None:
             self.log.warning(
                 "Worker %s: job %s still running %.0f s after SIGTERM; handing it back to the queue",
                 self.name,
@@ -109,7 +117,7 @@ class RenderWorker(Worker):
     def fail_job_of_final_step(self, job: Job, reason: str) -> None:
         """Fail the hgrender job whose final step ``job`` failed for good with ``reason`` (one line),
         unless the step already did, or the job ended otherwise."""
-        if job.func_name not in FINAL_STEP_TASKS or self.settings is None:
+        if job.func_name not in FINAL_STEP_TASKS:
             return
         from worker.tasks import fail_job  # the worker process has it loaded (preload_renderer)
 
@@ -156,11 +164,8 @@ def build_worker(settings: Settings, client: redis.Redis, name: str | None = Non
         worker_ttl=settings.worker_ttl_s,
         job_monitoring_interval=settings.worker_monitoring_interval_s,
         default_result_ttl=settings.result_ttl_s,
+        settings=settings,
     )
-    worker.heartbeat_grace_s = settings.worker_heartbeat_grace_s
-    worker.shutdown_grace_s = settings.worker_shutdown_grace_s
-    worker.settings = settings
-    worker.push_exc_handler(worker.handle_abandoned_final_step)
     return worker
 
 

@@ -163,6 +163,13 @@ def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> tuple[dict[st
     return jobs.scene(job_id), bundle_dir if inputs else None
 
 
+def _skipped(record: dict[str, str]) -> dict[str, Any] | None:
+    """The task's result when its job is gone or already ended (nothing left to do), else None."""
+    if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
+        return {"skipped": record.get("status", "deleted")}
+    return None
+
+
 class StepFailedError(RuntimeError):
     """An error of one step of a job, its message prefixed with the step (``chunk 0: …``, ``merge: …``)."""
 
@@ -207,8 +214,8 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
     """Render chunk ``chunk_index`` of job ``job_id`` and upload its partial buffers."""
     jobs, rq_job = _context()
     record = jobs.record(job_id)
-    if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
-        return {"skipped": record.get("status", "deleted")}
+    if (skipped := _skipped(record)) is not None:
+        return skipped
     from worker.render.api import save_chunk
 
     with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-{chunk_index}-") as tmp:
@@ -229,8 +236,8 @@ def render_job_task(job_id: str) -> dict[str, Any]:
     jobs, rq_job = _context()
     try:
         record = jobs.record(job_id)
-        if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
-            return {"skipped": record.get("status", "deleted")}
+        if (skipped := _skipped(record)) is not None:
+            return skipped
         with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-") as tmp:
             work_dir = Path(tmp)
             with _step("chunk 0"):
@@ -343,25 +350,22 @@ def merge_task(job_id: str) -> dict[str, Any]:
     jobs, rq_job = _context()
     try:
         record = jobs.record(job_id)
-        if not record or JobStatus(record["status"]) in TERMINAL_STATUSES:
-            return {"skipped": record.get("status", "deleted")}
+        if (skipped := _skipped(record)) is not None:
+            return skipped
         chunk_count = int(record["chunks"])
         failures = _chunk_failures(jobs, job_id, chunk_count)
         if failures:
             _fail(jobs, job_id, "; ".join(failures))
             return {"failed": failures}
         with _step("merge"), tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-merge-") as tmp:
-            from worker.render.api import load_chunk
+            from worker.render.api import load_chunks
 
             started_s = _merge_started(jobs, rq_job, job_id)
             work_dir = Path(tmp)
-            chunk_sums, render_seconds = [], 0.0
-            for index in range(chunk_count):
-                path = work_dir / "chunks" / f"{index}.npz"
+            chunk_paths = [work_dir / "chunks" / f"{index}.npz" for index in range(chunk_count)]
+            for index, path in enumerate(chunk_paths):
                 jobs.store.get_file(chunk_key(job_id, index), path)
-                sums, seconds = load_chunk(path)
-                chunk_sums.append(sums)
-                render_seconds += seconds
+            chunk_sums, render_seconds = load_chunks(chunk_paths)
             return _write_final_artifacts(jobs, job_id, work_dir, chunk_sums, render_seconds, started_s)
     except StepFailedError as error:
         _fail_on_last_attempt(jobs, rq_job, job_id, str(error))

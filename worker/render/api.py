@@ -148,6 +148,12 @@ def load_chunk(path: Path) -> tuple[PixelSums, float]:
     return PixelSums.from_arrays(arrays), float(arrays["seconds"])
 
 
+def load_chunks(paths: Sequence[Path]) -> tuple[list[PixelSums], float]:
+    """The chunks' sums, in the order given, and their render time summed (seconds)."""
+    loaded = [load_chunk(Path(path)) for path in paths]
+    return [sums for sums, _ in loaded], sum(seconds for _, seconds in loaded)
+
+
 def merge_chunks(
     scene: Scene | dict[str, Any],
     chunk_paths: Sequence[Path],
@@ -158,14 +164,8 @@ def merge_chunks(
     """Add the chunks' sums and write image.exr, variance.exr, preview.png and summary.json."""
     if not chunk_paths:
         raise ValueError("chunk_paths: at least one chunk is needed")
-    loaded = [load_chunk(Path(path)) for path in sorted(chunk_paths, key=lambda p: str(p))]
-    return write_merged(
-        scene,
-        [sums for sums, _ in loaded],
-        sum(seconds for _, seconds in loaded),
-        out_dir,
-        extra_summary=extra_summary,
-    )
+    chunk_sums, render_seconds = load_chunks(sorted(chunk_paths, key=lambda p: str(p)))
+    return write_merged(scene, chunk_sums, render_seconds, out_dir, extra_summary=extra_summary)
 
 
 def write_merged(
