@@ -30,12 +30,12 @@ from typing import Any
 import numpy as np
 
 from bench.machine import cpu_model, cpu_reference_s, write_results
+from hgcore.optics.coherence import degree_of_coherence
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.grating import CD_GRATING, grating_eval
+from hgcore.optics.sources import source_coefficients
+from hgcore.optics.thin_film import gaussian_visibilities, thin_film_reflectance
 from worker.mitsuba_setup import load_mitsuba
-from worker.optics.coherence import degree_of_coherence
-from worker.optics.complex_pair import ComplexPair
-from worker.optics.grating import CD_GRATING, grating_eval
-from worker.optics.sources import source_coefficients
-from worker.optics.thin_film import gaussian_visibilities, thin_film_reflectance
 
 SAMPLE_COUNT = 10_000_000
 WARM_REPEATS = 3
@@ -67,7 +67,7 @@ def main(count: int = SAMPLE_COUNT, repeats: int = WARM_REPEATS) -> dict[str, An
     import drjit as dr
     from drjit.llvm import Float
 
-    from worker.optics.array_ops import drjit_ops
+    from hgcore.optics.array_ops import drjit_ops
 
     dr.set_thread_count(1)  # before the first kernel: one core, as the targets assume
     ops = drjit_ops()

@@ -3,7 +3,7 @@
 * A :data:`schemas.scene.Spectrum` evaluates as documented on its model: ``constant`` → value; ``blackbody``
   → Planck's law B_λ(T) in W·m⁻²·sr⁻¹·nm⁻¹; ``d65``/``cie_f`` → the CIE table divided by its value at
   560 nm; ``tabulated`` → piecewise-linear through the samples, 0 outside. Tables come from
-  ``worker.optics.spectra`` (NumPy only; no Mitsuba).
+  ``hgcore.optics.spectra`` (NumPy only; no Mitsuba).
 * Luminance of a Lambertian emitter with spectral radiance L_λ = c·s(λ) (W·m⁻²·sr⁻¹·nm⁻¹):
   L_v = K_m · c · ∫ s(λ) ȳ(λ) dλ in cd·m⁻² ("nits"), K_m = 683 lm/W, ȳ the CIE 1931 2° function.
 * Power of an emitter of area A (m²), Lambertian on its emitting side: P = π · A · c · ∫_{λmin}^{λmax} s dλ.
@@ -16,6 +16,13 @@ import math
 
 import numpy as np
 
+from hgcore.optics.spectra import (
+    cie_cmf,
+    cie_illuminant,
+    planck_radiance,
+    spectrum_to_xyz,
+    xyz_to_linear_srgb,
+)
 from schemas.scene import (
     BlackbodySpectrum,
     CieFSpectrum,
@@ -26,13 +33,6 @@ from schemas.scene import (
     RectangleEmitter,
     SphereEmitter,
     TabulatedSpectrum,
-)
-from worker.optics.spectra import (
-    cie_cmf,
-    cie_illuminant,
-    planck_radiance,
-    spectrum_to_xyz,
-    xyz_to_linear_srgb,
 )
 
 SpectrumModel = ConstantSpectrum | BlackbodySpectrum | D65Spectrum | CieFSpectrum | TabulatedSpectrum

@@ -40,7 +40,8 @@ from rq.job import Dependency
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
-from service.core.config import Settings
+from hgcore.settings import Settings
+from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 from service.models import (
     TERMINAL_STATUSES,
     ChunkView,
@@ -49,7 +50,6 @@ from service.models import (
     JobView,
     Priority,
 )
-from service.store.base import ArtifactNotFoundError, ArtifactStore
 
 PRIORITY_QUEUES: dict[str, str] = {"high": "high", "normal": "default", "low": "low"}
 CHUNK_TASK = "worker.tasks.render_chunk_task"

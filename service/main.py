@@ -12,6 +12,9 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
+from hgcore.redis_clients import async_redis_client, redis_client
+from hgcore.settings import Settings
+from hgcore.store import store_from_settings
 from hgrender import __version__
 from schemas import SceneLimits
 from service.api.errors import install_exception_handlers
@@ -19,11 +22,8 @@ from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware
 from service.api.routes import coherence, health, jobs, schemas, tokens, viewer, web
 from service.api.routes import schedules as regression_routes
 from service.auth import RequestAuthenticator, TokenRegistry
-from service.core.config import Settings
-from service.core.redis_clients import async_redis_client, redis_client
 from service.jobs import JobService
 from service.metrics import LatencyHistogram
-from service.store import store_from_settings
 
 DESCRIPTION = """Render partially-coherent light in Hermite-Gauss space (Steinberg & Yan 2021).
 

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import redis
 from rq import Queue
 
-from service.core.config import QUEUE_NAMES
+from hgcore.settings import QUEUE_NAMES
 from service.jobs import JobService
 
 LATENCY_BUCKETS_S: tuple[float, ...] = (

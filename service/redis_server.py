@@ -15,7 +15,7 @@ from pathlib import Path
 
 import redis
 
-from service.core.redis_clients import redis_client
+from hgcore.redis_clients import redis_client
 
 
 def free_loopback_port() -> int:

@@ -29,10 +29,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from hgrender.colour import D65_WHITE_XYZ, ciede2000, xyz_to_lab
-from hgrender.imaging import REC709_LUMINANCE, display_rgb8, tone_map
-from service.store.base import ArtifactNotFoundError, ArtifactStore
-from worker.optics.spectra import XYZ_TO_LINEAR_SRGB
+from hgcore.colour import D65_WHITE_XYZ, ciede2000, xyz_to_lab
+from hgcore.imaging import REC709_LUMINANCE, display_rgb8, tone_map
+from hgcore.optics.spectra import XYZ_TO_LINEAR_SRGB
+from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 
 IMAGE_ARTIFACT = "image.exr"
 BAND_PREFIX = "S0."
@@ -191,8 +191,8 @@ def _decoded(width: int, height: int, channels: dict[str, np.ndarray], partial: 
 def merge_partials(paths: list[Path], film: dict[str, Any]) -> DecodedImage:
     """The image of the chunk partials finished so far (a running job's preview): the renderer's own
     merge of per-pixel sums (``worker.render.output``, NumPy only), without writing anything."""
+    from hgcore.pixel_sums import PixelSums
     from worker.render.output import image_channels, images_from_sums
-    from worker.render.pixel_sums import PixelSums
     from worker.render.spectral import BandLayout
 
     total: PixelSums | None = None
@@ -349,7 +349,7 @@ def pixel_record(image: DecodedImage, x: int, y: int) -> dict[str, object]:
 
 
 def display_png(image: DecodedImage, exposure_ev: float, operator: str) -> bytes:
-    """The sRGB image as the viewer shows it (``hgrender.imaging.display_rgb8``), PNG-encoded."""
+    """The sRGB image as the viewer shows it (``hgcore.imaging.display_rgb8``), PNG-encoded."""
     from PIL import Image
 
     buffer = io.BytesIO()

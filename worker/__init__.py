@@ -1,1 +1,1 @@
-"""Render workers: optics core (``worker.optics``), Mitsuba integrator (``worker.render``), queue tasks."""
+"""Render workers: the Mitsuba integrator (``worker.render``), the RQ worker class and its queue tasks."""

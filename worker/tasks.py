@@ -1,7 +1,7 @@
 """RQ job functions: render one chunk of a job, merge a job's chunks into its final artifacts, or do both
 for a job of one chunk; and fail a job whose final step failed for good.
 
-They run in RQ's forked work horse (``service.queue_worker``), so the renderer (Mitsuba, Dr.Jit) is
+They run in RQ's forked work horse (``worker.queue_worker``), so the renderer (Mitsuba, Dr.Jit) is
 imported here and never in the API process. A chunk renders spp partition ``i`` of
 ``worker.render.api.plan_chunks(spp, K, seed)`` and uploads ``jobs/<id>/chunks/<i>.npz`` to the artifact
 store; a retried chunk uploads to the same key, so a retry never leaves a duplicate. The merge step runs
@@ -32,13 +32,13 @@ from rq.exceptions import NoSuchJobError
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
+from hgcore.pixel_sums import PixelSums
+from hgcore.settings import Settings
+from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
 from schemas.scene import MAX_FILM_MODES, Scene
-from service.core.config import Settings
 from service.jobs import JobService, chunk_key, chunk_rq_id, scene_key
 from service.models import TERMINAL_STATUSES, JobStatus
-from service.store import store_from_settings
-from worker.render.pixel_sums import PixelSums
 
 if TYPE_CHECKING:
     from worker.render.api import RenderedChunk
@@ -89,8 +89,8 @@ def _load_libraries() -> None:
 
 
 def _fill_caches() -> None:
-    from worker.optics import ior, spectra
-    from worker.optics.sources import source_coefficients
+    from hgcore.optics import ior, spectra
+    from hgcore.optics.sources import source_coefficients
 
     # The renderer's disk and rectangle source expansions (~3 ms each).
     for modes in range(1, MAX_FILM_MODES + 1):
@@ -339,7 +339,7 @@ def _fail_on_last_attempt(jobs: JobService, rq_job: RQJob, job_id: str, error: s
 
 def fail_job(jobs: JobService, job_id: str, error: str) -> None:
     """Fail the job unless it already ended (it may have been canceled or deleted meanwhile). Also called
-    by the worker when a final step's work horse died on its last attempt (``service.queue_worker``)."""
+    by the worker when a final step's work horse died on its last attempt (``worker.queue_worker``)."""
     if jobs.status(job_id) not in {*TERMINAL_STATUSES, None}:
         _fail(jobs, job_id, error)
 

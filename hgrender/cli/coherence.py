@@ -1,6 +1,6 @@
 """``hgrender coherence``: the coherence a source gives a receiver (issue 2, item 7).
 
-Thin wrapper over ``worker.optics.calculator.coherence_at`` (NumPy only: no Mitsuba, no Dr.Jit). Prints one
+Thin wrapper over ``hgcore.optics.calculator.coherence_at`` (NumPy only: no Mitsuba, no Dr.Jit). Prints one
 JSON object with ``--json``, else a readable table. Invalid values raise ValueError naming the flag, which the
 CLI entry point turns into exit code 2 and a one-line message.
 """
@@ -11,8 +11,8 @@ import argparse
 import json
 from typing import Any
 
-from worker.optics.calculator import coherence_at
-from worker.optics.sources import SOURCE_KINDS
+from hgcore.optics.calculator import coherence_at
+from hgcore.optics.sources import SOURCE_KINDS
 
 # calculator parameter → command-line flag, so that error messages name what the user typed.
 _FLAG_FOR_PARAMETER = {

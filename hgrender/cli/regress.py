@@ -213,7 +213,7 @@ def regress_command(args: argparse.Namespace) -> int:
 def scheduler_command(args: argparse.Namespace) -> int:
     import logging
 
-    from service.core.config import Settings
+    from hgcore.settings import Settings
     from service.regression.scheduler import RegressionScheduler
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")

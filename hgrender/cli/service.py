@@ -20,8 +20,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from hgcore.redis_clients import redis_client
 from hgrender.cli import CliError
-from service.core.redis_clients import redis_client
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 
@@ -142,8 +142,8 @@ def _exit_on_signal(signum: int, _frame: object) -> None:
 def serve_command(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from hgcore.settings import Settings
     from service.auth import ensure_admin_token
-    from service.core.config import Settings
     from service.main import create_app
     from service.redis_server import RedisServer
     from service.regression.scheduler import start_scheduler_thread
@@ -195,8 +195,8 @@ def serve_command(args: argparse.Namespace) -> int:
 
 
 def worker_command(args: argparse.Namespace) -> int:
-    from service.core.config import Settings
-    from service.queue_worker import run_worker
+    from hgcore.settings import Settings
+    from worker.queue_worker import run_worker
     from worker.tasks import preload_renderer
 
     settings = Settings()

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from hgrender.colour import D65_WHITE_XYZ, bands_to_xyz, ciede2000, xyz_to_lab
+from hgcore.colour import D65_WHITE_XYZ, bands_to_xyz, ciede2000, xyz_to_lab
 from service.regression.images import COHERENCE_METRIC_CHANNELS, RenderOutputs
 from service.regression.models import Thresholds
 

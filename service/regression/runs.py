@@ -23,8 +23,9 @@ import redis
 from rq import Queue, get_current_job
 from rq.job import Dependency
 
+from hgcore.settings import Settings
+from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
-from service.core.config import Settings
 from service.jobs import JobService, merge_rq_id
 from service.models import JobStatus
 from service.regression.images import load_render_outputs
@@ -32,7 +33,6 @@ from service.regression.metrics import compare_renders
 from service.regression.models import RunView, SceneResult, Suite, SuiteScene
 from service.regression.store import BASELINE_FILES, RegressionStore
 from service.regression.webhooks import deliver_webhook
-from service.store import store_from_settings
 
 EVALUATE_TASK = "service.regression.runs.evaluate_run_task"
 EVALUATE_QUEUE = "default"

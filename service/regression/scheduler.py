@@ -37,8 +37,8 @@ from apscheduler.triggers.cron import CronTrigger
 from apscheduler.triggers.interval import IntervalTrigger
 from redis.connection import parse_url
 
-from service.core.config import Settings
-from service.core.redis_clients import redis_client
+from hgcore.redis_clients import redis_client
+from hgcore.settings import Settings
 from service.regression.models import ScheduleView
 from service.regression.runs import RunService, run_service_for
 from service.regression.store import RegressionStore

@@ -21,8 +21,8 @@ import uuid
 
 import redis
 
+from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 from service.regression.models import BaselineList, BaselineView, RunView, ScheduleCreate, ScheduleView
-from service.store.base import ArtifactNotFoundError, ArtifactStore
 
 _PREFIX = "hgrender:regression:"
 _SCHEDULE_KEY = _PREFIX + "schedule:{}"

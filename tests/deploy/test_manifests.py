@@ -23,9 +23,9 @@ from typing import Any
 import pytest
 import yaml
 
+from hgcore.settings import QUEUE_NAMES, Settings
 from hgrender.cli import build_parser
 from schemas.limits import SceneLimits
-from service.core.config import QUEUE_NAMES, Settings
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEPLOY_DIR = REPO_ROOT / "deploy"

@@ -30,10 +30,10 @@ from typing import Any
 import pytest
 import redis
 
+from hgcore.settings import Settings
+from hgcore.store import store_from_settings
 from hgrender.cli.service import worker_command_line
-from service.core.config import Settings
 from service.jobs import JobService
-from service.store import store_from_settings
 from tests.service.conftest import tiny_scene, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]

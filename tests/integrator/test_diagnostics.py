@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from hgcore.optics.calculator import coherence_at
 from tests.integrator.scenes import plane_under_source
-from worker.optics.calculator import coherence_at
 from worker.render.api import render_scene
 
 SIZE = 24

@@ -16,8 +16,8 @@ import OpenImageIO as oiio
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
+from hgcore.optics.calculator import coherence_at
 from schemas.usd_import import import_usd_isolated
-from worker.optics.calculator import coherence_at
 from worker.render.api import render_scene
 
 LENGTH_M = 0.2

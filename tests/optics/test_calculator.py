@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from worker.optics.calculator import coherence_at
+from hgcore.optics.calculator import coherence_at
 
 REPO = Path(__file__).resolve().parents[2]
 HGRENDER = REPO / ".venv" / "bin" / "hgrender"
@@ -175,7 +175,7 @@ def test_cli_invalid_inputs_exit_2_naming_the_flag(arguments: list[str], flag: s
 def test_calculator_never_imports_mitsuba_or_drjit() -> None:
     # The service calls coherence_at in-process and must not load Mitsuba/Dr.Jit, even transitively.
     code = (
-        "import sys, worker.optics.calculator as c, hgrender.cli.coherence;"
+        "import sys, hgcore.optics.calculator as c, hgrender.cli.coherence;"
         "c.coherence_at('cylinder', radius_m=1e-3, length_m=0.2, distance_m=0.6, modes=16);"
         "bad = [m for m in sys.modules if m.split('.')[0] in ('mitsuba', 'drjit')]; assert not bad, bad"
     )

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.special import j1
 
-from worker.optics.array_ops import NUMPY
-from worker.optics.coherence import (
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.coherence import (
     coherence_diagnostics,
     degree_of_coherence,
     diagnostics_components,
@@ -17,8 +17,8 @@ from worker.optics.coherence import (
     shape_matrix_from_covariance,
     shape_matrix_from_log_hessian,
 )
-from worker.optics.expansion import reconstruct
-from worker.optics.sources import source_coefficients
+from hgcore.optics.expansion import reconstruct
+from hgcore.optics.sources import source_coefficients
 
 WAVELENGTH_M = 550e-9
 K = 2 * math.pi / WAVELENGTH_M
@@ -191,7 +191,7 @@ def test_drjit_degree_of_coherence_and_diagnostics_equal_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from worker.optics.array_ops import drjit_ops
+    from hgcore.optics.array_ops import drjit_ops
 
     rng = np.random.default_rng(2)
     sigma = rotated((3e-6, 7e-7), 0.9)

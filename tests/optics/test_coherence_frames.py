@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from worker.optics.array_ops import NUMPY
-from worker.optics.frames import transverse_frame, transverse_frame_components
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.frames import transverse_frame, transverse_frame_components
 
 
 def assert_right_handed_orthonormal(x_axis: np.ndarray, y_axis: np.ndarray, direction: np.ndarray) -> None:
@@ -72,7 +72,7 @@ def test_drjit_frame_equals_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from worker.optics.array_ops import drjit_ops
+    from hgcore.optics.array_ops import drjit_ops
 
     rng = np.random.default_rng(9)
     directions = rng.normal(size=(16, 3))

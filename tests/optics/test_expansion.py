@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from worker.optics.array_ops import transverse_modes
-from worker.optics.expansion import project_csd, project_onto, reconstruct
-from worker.optics.hg import hg_functions, multi_indices
+from hgcore.optics.array_ops import transverse_modes
+from hgcore.optics.expansion import project_csd, project_onto, reconstruct
+from hgcore.optics.hg import hg_functions, multi_indices
 
 ROTATION = np.array([[math.cos(0.4), -math.sin(0.4)], [math.sin(0.4), math.cos(0.4)]])
 THETA = ROTATION @ np.diag([1.8, 0.6]) @ ROTATION.T

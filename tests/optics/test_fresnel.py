@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from worker.optics.array_ops import NUMPY
-from worker.optics.complex_pair import ComplexPair
-from worker.optics.fresnel import (
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.fresnel import (
     fresnel_dielectric,
     fresnel_reflectance,
     interface_amplitudes,

@@ -15,17 +15,17 @@ from typing import Any
 import numpy as np
 import pytest
 
-from worker.optics.array_ops import NUMPY
-from worker.optics.complex_pair import ComplexPair
-from worker.optics.fresnel import fresnel_dielectric, fresnel_reflectance
-from worker.optics.grating import CD_GRATING, grating_eval, grating_pdf, grating_sample
-from worker.optics.rough_surface import (
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.fresnel import fresnel_dielectric, fresnel_reflectance
+from hgcore.optics.grating import CD_GRATING, grating_eval, grating_pdf, grating_sample
+from hgcore.optics.rough_surface import (
     RoughSurface,
     rough_reflection_eval,
     rough_reflection_pdf,
     rough_reflection_sample,
 )
-from worker.optics.thin_film import gaussian_visibilities, thin_film_reflectance
+from hgcore.optics.thin_film import gaussian_visibilities, thin_film_reflectance
 
 TOLERANCE = 1e-4
 COUNT = 4096
@@ -39,7 +39,7 @@ def drjit_env() -> tuple[Any, Any, Any]:
     import drjit as dr
     from drjit.llvm import Float
 
-    from worker.optics.array_ops import drjit_ops
+    from hgcore.optics.array_ops import drjit_ops
 
     return dr, Float, drjit_ops()
 

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from worker.optics.array_ops import NUMPY, hermite_functions
-from worker.optics.grating import (
+from hgcore.optics.array_ops import NUMPY, hermite_functions
+from hgcore.optics.grating import (
     CD_GRATING,
     DVD_GRATING,
     BinaryGrating,

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from worker.optics.array_ops import NUMPY, hermite_functions
-from worker.optics.hg import dual_hg_functions, hg_functions, multi_indices
+from hgcore.optics.array_ops import NUMPY, hermite_functions
+from hgcore.optics.hg import dual_hg_functions, hg_functions, multi_indices
 
 # A rotated (30°), anisotropic (eigenvalues 2.5 and 0.4) shape matrix: Ψ^Θ is not a product of 1-D functions.
 ROTATION = np.array([[math.cos(0.5236), -math.sin(0.5236)], [math.sin(0.5236), math.cos(0.5236)]])
@@ -135,7 +135,7 @@ def test_drjit_evaluation_equals_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from worker.optics.array_ops import drjit_ops
+    from hgcore.optics.array_ops import drjit_ops
 
     rng = np.random.default_rng(7)
     x_np = rng.uniform(-2.5, 2.5, 64)

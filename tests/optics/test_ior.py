@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import worker.optics.ior as ior_module
-from worker.optics.ior import ior_table, material_range_nm, spectral_ior
+import hgcore.optics.ior as ior_module
+from hgcore.optics.ior import ior_table, material_range_nm, spectral_ior
 
 MITSUBA_IOR_DIR = Path(__file__).resolve().parents[2] / ".venv/lib/python3.11/site-packages/mitsuba/data/ior"
 

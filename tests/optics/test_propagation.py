@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from worker.optics.propagation import CoherenceState
-from worker.optics.sources import source_coefficients, transverse_covariance
+from hgcore.optics.propagation import CoherenceState
+from hgcore.optics.sources import source_coefficients, transverse_covariance
 
 WAVELENGTH_M = 550e-9
 K = 2 * math.pi / WAVELENGTH_M

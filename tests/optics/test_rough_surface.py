@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from worker.optics.array_ops import NUMPY
-from worker.optics.fresnel import fresnel_dielectric
-from worker.optics.rough_surface import (
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.fresnel import fresnel_dielectric
+from hgcore.optics.rough_surface import (
     RoughSurface,
     rough_reflection_eval,
     rough_reflection_pdf,

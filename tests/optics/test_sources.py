@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.special import j1
 
-from worker.optics.array_ops import NUMPY, hermite_functions
-from worker.optics.coherence import shape_matrix_from_log_hessian
-from worker.optics.frames import transverse_frame
-from worker.optics.sources import (
+from hgcore.optics.array_ops import NUMPY, hermite_functions
+from hgcore.optics.coherence import shape_matrix_from_log_hessian
+from hgcore.optics.frames import transverse_frame
+from hgcore.optics.sources import (
     covariance_from_angular_coherence,
     covariance_from_intensity_image,
     cylinder_covariance_components,
@@ -115,7 +115,7 @@ def test_fig7_cylinder_and_sphere_numbers() -> None:
     # Paper Fig. 7: cylinder R = 0.1 cm, L = 20 cm side-on at 60 cm: ℓ along the axis = r/(k L/√12)
     # ≈ 0.91 µm ("less than a micron") and across = r/(k R/√3) ≈ 91 µm ("tens of µm"). Sphere R = 0.6 cm:
     # ℓ = r/(k R/2) ≈ 17.5 µm (paper: "about 15 µm × 15 µm"; its cut-off factor is ad hoc, Cor. 4.2).
-    from worker.optics.calculator import coherence_at
+    from hgcore.optics.calculator import coherence_at
 
     k = 2 * math.pi / 550e-9
     cylinder = coherence_at("cylinder", radius_m=0.001, length_m=0.2, distance_m=0.6)
@@ -240,7 +240,7 @@ def test_drjit_covariance_components_equal_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from worker.optics.array_ops import drjit_ops
+    from hgcore.optics.array_ops import drjit_ops
 
     rng = np.random.default_rng(5)
     axes = rng.normal(size=(32, 3))
@@ -293,7 +293,7 @@ def test_scattering_region_disk_consequences(exit_angle_deg: float) -> None:
     # Modelling choice (docs/physics.md §7): a non-specular vertex scatters from a uniform disk of radius a
     # in its tangent plane, seen foreshortened. Leaving at θ from the normal: Σ⊥ eigenvalues a²/4 and
     # a²cos²θ/4, so anisotropy = 1/cos θ and ℓ₁ lies along the projected normal (the narrow direction).
-    from worker.optics.coherence import coherence_diagnostics
+    from hgcore.optics.coherence import coherence_diagnostics
 
     radius, r = 1e-3, 0.25
     theta = math.radians(exit_angle_deg)

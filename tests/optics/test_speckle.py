@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from worker.optics.hg import dual_hg_functions
-from worker.optics.speckle import angular_coherence_coefficients, pair_coherence, speckle_intensity
+from hgcore.optics.hg import dual_hg_functions
+from hgcore.optics.speckle import angular_coherence_coefficients, pair_coherence, speckle_intensity
 
 FRAME = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # incident beam along z
 ZEROTH_MODE = {(0, 0): math.sqrt(math.pi)}

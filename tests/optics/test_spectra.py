@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize
 
-from worker.optics.spectra import (
+from hgcore.optics.spectra import (
     ILLUMINANTS,
     cie_cmf,
     cie_illuminant,

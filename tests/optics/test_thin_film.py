@@ -1,7 +1,7 @@
 """Thin-film reflectance (Eq. 18 generalised to P beams) against the Airy and two-beam closed forms.
 
 The reference values are computed here independently with NumPy complex arithmetic (textbook Fresnel
-formulas, Born & Wolf §1.6 / §7.6), not with ``worker.optics.fresnel``.
+formulas, Born & Wolf §1.6 / §7.6), not with ``hgcore.optics.fresnel``.
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from worker.optics.array_ops import NUMPY
-from worker.optics.coherence import degree_of_coherence
-from worker.optics.complex_pair import ComplexPair
-from worker.optics.sources import cylinder_covariance_components
-from worker.optics.thin_film import (
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.coherence import degree_of_coherence
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.sources import cylinder_covariance_components
+from hgcore.optics.thin_film import (
     combine_reflectance_terms,
     gaussian_visibilities,
     thin_film_reflectance,

@@ -1,4 +1,4 @@
-"""CIEDE2000 and the spectrum → XYZ → CIELAB chain of ``hgrender.colour`` against published values.
+"""CIEDE2000 and the spectrum → XYZ → CIELAB chain of ``hgcore.colour`` against published values.
 
 The 34 pairs of Sharma, Wu & Dalal (2005), Table 1 (``data/sharma2005_ciede2000.csv``, see its header) are
 published to 4 decimals, so each computed ΔE₀₀ must agree to half a unit of the last digit (5e-5); float64
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hgrender.colour import D65_WHITE_XYZ, bands_to_xyz, ciede2000, xyz_to_lab
-from worker.optics.spectra import cie_cmf
+from hgcore.colour import D65_WHITE_XYZ, bands_to_xyz, ciede2000, xyz_to_lab
+from hgcore.optics.spectra import cie_cmf
 
 DATA_FILE = Path(__file__).parent / "data" / "sharma2005_ciede2000.csv"
 

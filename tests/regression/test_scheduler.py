@@ -19,11 +19,11 @@ from pathlib import Path
 import pytest
 import redis
 
+from hgcore.settings import Settings
+from hgcore.store import store_from_settings
 from hgrender.cli.service import worker_command_line
-from service.core.config import Settings
 from service.regression.models import ScheduleCreate, Suite, SuiteScene
 from service.regression.store import RegressionStore
-from service.store import store_from_settings
 
 INTERVAL_S = 2
 

@@ -1,6 +1,6 @@
 """CIEDE2000 colour differences of linear-sRGB images (for the Fig. 9 mode comparison).
 
-* Linear sRGB → CIE XYZ: the inverse of ``worker.optics.spectra.XYZ_TO_LINEAR_SRGB`` (IEC 61966-2-1), i.e.
+* Linear sRGB → CIE XYZ: the inverse of ``hgcore.optics.spectra.XYZ_TO_LINEAR_SRGB`` (IEC 61966-2-1), i.e.
   exactly the transform the renderer used to make its RGB channels; the D65 reference white is the XYZ of
   the grey RGB = (w, w, w), w = ``white_level``.
 * XYZ → CIELAB (CIE 15:2004): L* = 116 f(Y/Y_n) − 16, a* = 500 (f(X/X_n) − f(Y/Y_n)),
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.optics.spectra import XYZ_TO_LINEAR_SRGB
+from hgcore.optics.spectra import XYZ_TO_LINEAR_SRGB
 
 LINEAR_SRGB_TO_XYZ = np.linalg.inv(XYZ_TO_LINEAR_SRGB)
 LAB_EPSILON = (6.0 / 29.0) ** 3

@@ -1,6 +1,6 @@
 """Thin-film fringe visibility measured from a rendered spectrum, against the two-beam form of Eq. (18).
 
-A coated surface seen at incidence θ reflects R(λ) = R_inc(λ) + 2·V·X₁(λ) (``worker.optics.thin_film`` with
+A coated surface seen at incidence θ reflects R(λ) = R_inc(λ) + 2·V·X₁(λ) (``hgcore.optics.thin_film`` with
 two beams: R_inc = |a₀|² + |a₁|², X₁ = Re a₁a₀*), V the incident light's degree of coherence at the film's
 transverse separation. The rendered radiance of a region is S_b = g(λ_b)·R_b with g a smooth factor (lobe
 shape, source spectrum, geometry). Dividing by the band-averaged R_inc,b and modelling g as a quadratic in
@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from worker.optics import ior
-from worker.optics.array_ops import NUMPY
-from worker.optics.complex_pair import ComplexPair
-from worker.optics.thin_film import film_amplitudes, reflectance_terms
+from hgcore.optics import ior
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.thin_film import film_amplitudes, reflectance_terms
 
 SAMPLES_PER_BAND = 41
 

@@ -203,7 +203,7 @@ def dvd_under_sphere(radius_m: float, *, spp: int) -> dict[str, Any]:
 
     The −1st order of wavelength λ leaves with direction cosine β_x = sin θ_i − λ/Λ, so the camera sees a
     rainbow streak along x through the centre (β_y = 0); its width in β_y is the lobe's std
-    √((a/2)²/s² + (w/k)²) (worker.optics.grating; a the source radius, s its distance, w the intrinsic width).
+    √((a/2)²/s² + (w/k)²) (hgcore.optics.grating; a the source radius, s its distance, w the intrinsic width).
     """
     elevation = math.asin(GRATING_INCIDENCE_SINE)
     light = [

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from scipy.special import erf
 
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.coherence import degree_of_coherence
+from hgcore.optics.sources import source_coefficients, sphere_covariance_components
 from tests.render import scenes
 from tests.render.colour import ciede2000, linear_srgb_to_lab
 from tests.render.exr import read_channels, spectral_stack
 from tests.render.fringes import FringeFit, fit_fringe_visibility, two_beam_band_terms
-from worker.optics.array_ops import NUMPY
-from worker.optics.coherence import degree_of_coherence
-from worker.optics.sources import source_coefficients, sphere_covariance_components
 from worker.render.api import render_scene
 from worker.render.spectral import LAMBDA_REFERENCE_NM
 
@@ -103,7 +103,7 @@ def test_fig7_fringes_fade_under_the_cylinder_where_the_normal_leans_along_its_a
 
 def test_fig1f_dvd_lobe_dims_under_a_larger_source_of_equal_power(tmp_path: Path) -> None:
     """Each diffraction order keeps its energy F·η_p while its peak falls as the source grows (Eq. 20 per
-    lobe, worker.optics.grating): across the streak the lobe is a Gaussian of std σ = √((a/2)²/s² + (wλ/2π)²)
+    lobe, hgcore.optics.grating): across the streak the lobe is a Gaussian of std σ = √((a/2)²/s² + (wλ/2π)²)
     in the offset β_o − β_pq. One image row (height Δ in direction cosines at the centre) turns the view
     direction by Δ and, through the surface point, the incident direction by Δ·h/s = Δ (camera height h =
     light distance s), so a row spans 2Δ of lobe offset; the streak is centred on a row boundary, so the

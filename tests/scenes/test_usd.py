@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
+from hgcore.optics.spectra import cie_cmf, planck_radiance
 from schemas import EXAMPLES_DIR, Scene, SceneError, validate_scene
 from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_scale
 from schemas.scene import BlackbodySpectrum, MeshShape, RoughConductorMaterial, SphereShape, ThinFilmMaterial
 from schemas.usd_export import scene_to_usd
 from schemas.usd_import import import_usd, import_usd_isolated
-from worker.optics.spectra import cie_cmf, planck_radiance
 
 EXAMPLE_PATHS = sorted(EXAMPLES_DIR.glob("*.json"))
 

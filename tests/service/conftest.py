@@ -20,11 +20,11 @@ import pytest
 import redis
 import uvicorn
 
+from hgcore.settings import Settings
 from hgrender.cli.service import worker_command_line
 from hgrender.client import HgrenderClient
 from schemas import EXAMPLES_DIR
 from service.auth import TokenRegistry
-from service.core.config import Settings
 from service.main import create_app
 from service.redis_server import free_loopback_port
 

@@ -20,7 +20,7 @@ from tests.service.conftest import REPO_ROOT, LiveService, http_get, tiny_scene
 
 def test_service_never_imports_mitsuba_or_drjit() -> None:
     code = (
-        "import sys, service.main, service.jobs, service.queue_worker, hgrender.client; "
+        "import sys, service.main, service.jobs, worker.queue_worker, hgrender.client; "
         "bad = [m for m in sys.modules if m.split('.')[0] in ('mitsuba', 'drjit')]; "
         "print(bad); sys.exit(1 if bad else 0)"
     )

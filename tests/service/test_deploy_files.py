@@ -7,8 +7,8 @@ import re
 
 import yaml
 
+from hgcore.settings import Settings
 from schemas.limits import SceneLimits
-from service.core.config import Settings
 from tests.service.conftest import REPO_ROOT
 
 

@@ -18,9 +18,9 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
+from hgcore.store import store_from_settings
 from hgrender.client import HgrenderClient
 from service.jobs import JobService
-from service.store import store_from_settings
 from tests.service.conftest import EXAMPLES_DIR, LiveService, tiny_scene, wait_for
 
 pytestmark = pytest.mark.slow

@@ -13,9 +13,9 @@ import boto3
 import httpx
 import pytest
 
+from hgcore.store import ArtifactNotFoundError, ArtifactStore, FilesystemStore
+from hgcore.store.s3 import S3Store
 from service.redis_server import free_loopback_port
-from service.store import ArtifactNotFoundError, ArtifactStore, FilesystemStore
-from service.store.s3 import S3Store
 
 
 @pytest.fixture(scope="module")

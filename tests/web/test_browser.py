@@ -3,7 +3,7 @@ display transform, exposure, the wavelength slider, coherence ellipses of a cyli
 inspector, live progress of a running job, the compare view, keyboard access and a narrow viewport.
 
 Screenshots go to ``test-artifacts/``. Tolerances: the canvas is written from the same float32 data with
-the same formulas in double precision (JS) as ``hgrender.imaging`` (NumPy), so 8-bit values agree except
+the same formulas in double precision (JS) as ``hgcore.imaging`` (NumPy), so 8-bit values agree except
 where a value lands within rounding of a quantisation boundary: ±1 level.
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from hgrender.imaging import auto_exposure_ev, display_rgb8
+from hgcore.imaging import auto_exposure_ev, display_rgb8
 from tests.web.conftest import SIZE_PX, RenderedJob, Served, screenshot
 
 pytestmark = pytest.mark.browser

@@ -13,8 +13,8 @@ import math
 import numpy as np
 from PIL import Image
 
-from hgrender.imaging import display_rgb8, tone_map
-from service.store.filesystem import FilesystemStore
+from hgcore.imaging import display_rgb8, tone_map
+from hgcore.store.filesystem import FilesystemStore
 from service.viewer_data import DecodedImageCache
 from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene
 
@@ -137,7 +137,7 @@ def test_compare_modes_against_independent_formulas(
             [116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1
         )
 
-    from hgrender.colour import ciede2000
+    from hgcore.colour import ciede2000
 
     np.testing.assert_allclose(de, ciede2000(lab(a), lab(b)), rtol=0, atol=2e-2)
     assert float(de.max()) > 0.5  # different seeds: visibly different noise

@@ -14,7 +14,7 @@
 //
 // `api` is an instance of Api (web/js/api.js) or any object with the same `floats(path)` method.
 // Both jobs must have succeeded and have images of the same size. ΔE₀₀ is computed by the server
-// (GET /v1/compare, hgrender.colour) on both images as displayed with the same EV and tone map.
+// (GET /v1/compare, hgcore.colour) on both images as displayed with the same EV and tone map.
 
 import { displayRgb8, TONE_MAPS } from "./imaging.js";
 import { drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.pixel_sums import PixelSums
 from schemas.scene import Scene
 from schemas.validation import validate_scene
 from worker.render.output import (
@@ -26,7 +27,6 @@ from worker.render.output import (
     write_images,
     write_summary,
 )
-from worker.render.pixel_sums import PixelSums
 from worker.render.renderer import Renderer
 from worker.render.scene_compiler import SceneCompiler
 

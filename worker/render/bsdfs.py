@@ -3,12 +3,12 @@
 All functions run inside the integrator's symbolic loop on Dr.Jit arrays. Directions are in the local
 shading frame (z = normal, flipped towards the incident side for two-sided materials); ``wi`` points to the
 previous vertex (towards the camera), ``wo`` to the next one (towards the light); by reciprocity the
-formulas of ``worker.optics`` are evaluated with the light arriving along ``wo``. ``eval_pdf`` returns
+formulas of ``hgcore.optics`` are evaluated with the light arriving along ``wo``. ``eval_pdf`` returns
 f·cos θo and the hero-wavelength MIS density in solid angle — the mean over the four wavelengths of the
 per-wavelength sampling density, so that wavelength-dependent lobes (gratings, PSD lobes) combine without
 bias (Wilkie et al. 2014, "Hero wavelength spectral sampling").
 
-The physics lives in ``worker.optics`` (rough surfaces: Eq. 15; thin films: Eq. 18; gratings: Eq. 20);
+The physics lives in ``hgcore.optics`` (rough surfaces: Eq. 15; thin films: Eq. 18; gratings: Eq. 20);
 this module gathers parameters and dispatches. Diffuse, mirror and smooth dielectric materials read their
 spectra from the material table (one kernel branch per kind); rough, thin-film and grating materials get
 one branch per material with their constants compiled in (their optics models are Python objects).
@@ -24,12 +24,12 @@ from typing import Any
 
 import drjit as dr
 
-from worker.optics import grating as grating_model
-from worker.optics import rough_surface
-from worker.optics.array_ops import drjit_ops
-from worker.optics.complex_pair import ComplexPair
-from worker.optics.fresnel import fresnel_dielectric, fresnel_reflectance
-from worker.optics.thin_film import combine_reflectance_terms, film_amplitudes, reflectance_terms
+from hgcore.optics import grating as grating_model
+from hgcore.optics import rough_surface
+from hgcore.optics.array_ops import drjit_ops
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.fresnel import fresnel_dielectric, fresnel_reflectance
+from hgcore.optics.thin_film import combine_reflectance_terms, film_amplitudes, reflectance_terms
 from worker.render import materials as mat
 from worker.render.spectral import lookup
 

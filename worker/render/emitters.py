@@ -2,7 +2,7 @@
 
 Following the BRIEF, the coherence an emitter gives a receiver is that of the *whole* emitter seen from the
 receiver in the far field, with the phase taken along the direction from the emitter's centre: the
-transverse covariance Σ⊥ (m²) of its projected silhouette (``worker.optics.sources``) in a frame ⟂ to the
+transverse covariance Σ⊥ (m²) of its projected silhouette (``hgcore.optics.sources``) in a frame ⟂ to the
 centre→receiver direction, and the propagation distance r = |receiver − centre| (m). Points sampled on
 the emitter by next-event estimation serve the radiometric terms only; using them for coherence too
 would count decoherence twice (once through Σ⊥, once through the spread of sampled directions).
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.optics import sources
+from hgcore.optics import sources
 
 
 class EmitterKind(IntEnum):
@@ -110,7 +110,7 @@ def emitter_coherence(
     """
     import drjit as dr
 
-    from worker.optics.array_ops import drjit_ops
+    from hgcore.optics.array_ops import drjit_ops
 
     ops = drjit_ops()
     base = emitter_index * STRIDE

@@ -32,11 +32,11 @@ from typing import Any
 
 import drjit as dr
 
+from hgcore.optics import sources
+from hgcore.optics.array_ops import drjit_ops
+from hgcore.optics.coherence import degree_of_coherence
+from hgcore.optics.frames import transverse_frame_components
 from worker.mitsuba_setup import load_mitsuba
-from worker.optics import sources
-from worker.optics.array_ops import drjit_ops
-from worker.optics.coherence import degree_of_coherence
-from worker.optics.frames import transverse_frame_components
 from worker.render import materials as mat
 from worker.render.bsdfs import IncidentCoherence, MaterialKernels, combine_film_terms
 from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect

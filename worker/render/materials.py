@@ -61,7 +61,7 @@ SPECULAR_KINDS = frozenset({MaterialKind.MIRROR, MaterialKind.DIELECTRIC})
 class MaterialRecord:
     """One material: its kind, table values (offset -> value) and, for the statistical and diffractive
     kinds, the optics model object whose constants are compiled into the kernel
-    (``worker.optics.rough_surface.RoughSurface`` or ``worker.optics.grating.BinaryGrating``)."""
+    (``hgcore.optics.rough_surface.RoughSurface`` or ``hgcore.optics.grating.BinaryGrating``)."""
 
     kind: MaterialKind
     values: dict[int, float] = field(default_factory=dict)

@@ -19,11 +19,11 @@ from typing import Any
 
 import numpy as np
 
-from hgrender.colour import band_edges_xyz_weights, y_bar_integral_nm
-from hgrender.imaging import auto_exposure_ev, display_rgb8
-from worker.optics import spectra
-from worker.optics.coherence import diagnostics_components
-from worker.render.pixel_sums import PixelSums
+from hgcore.colour import band_edges_xyz_weights, y_bar_integral_nm
+from hgcore.imaging import auto_exposure_ev, display_rgb8
+from hgcore.optics import spectra
+from hgcore.optics.coherence import diagnostics_components
+from hgcore.pixel_sums import PixelSums
 from worker.render.spectral import K_REFERENCE_PER_M, LAMBDA_REFERENCE_NM, BandLayout
 
 COHERENCE_CHANNELS = ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy")

@@ -17,11 +17,11 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
+from hgcore.optics.sources import source_coefficients
+from hgcore.pixel_sums import SUM_KEYS, PixelSums
 from worker.mitsuba_setup import load_mitsuba
-from worker.optics.sources import source_coefficients
 from worker.render.emitters import EmitterKind
 from worker.render.integrator import HGPathIntegrator, RenderContext, register
-from worker.render.pixel_sums import SUM_KEYS, PixelSums
 from worker.render.scene_compiler import CompiledScene
 
 MAX_WAVEFRONT = 1 << 20  # samples per pass: ~40 float32 outputs each stay in memory until reduced

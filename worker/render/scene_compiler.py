@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.optics import ior as ior_data
+from hgcore.optics.grating import BinaryGrating
+from hgcore.optics.rough_surface import RoughSurface
 from schemas import scene as model
 from schemas.photometry import evaluate_spectrum
-from worker.optics import ior as ior_data
-from worker.optics.grating import BinaryGrating
-from worker.optics.rough_surface import RoughSurface
 from worker.render import materials as mat
 from worker.render.emitters import EmitterKind, EmitterRecord, EmitterTable
 from worker.render.spectral import BandLayout, SpectralTable, grid_wavelengths_nm

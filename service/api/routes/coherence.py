@@ -7,9 +7,9 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter
 from pydantic import BaseModel, ConfigDict, Field
 
+from hgcore.optics.calculator import coherence_at
 from service.api.deps import Reader
 from service.models import Problem
-from worker.optics.calculator import coherence_at
 
 router = APIRouter(prefix="/v1", tags=["coherence"])
 
@@ -19,7 +19,7 @@ MAX_DISTANCE_M = 1e12
 
 
 class CoherenceRequest(BaseModel):
-    """Parameters of ``worker.optics.calculator.coherence_at`` (sizes in metres)."""
+    """Parameters of ``hgcore.optics.calculator.coherence_at`` (sizes in metres)."""
 
     model_config = ConfigDict(
         extra="forbid",

@@ -11,6 +11,7 @@ from sse_starlette import EventSourceResponse
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 
+from hgcore.store.base import validate_key
 from schemas import SceneLimits
 from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
 from service.events import job_events
@@ -26,7 +27,6 @@ from service.models import (
     JobView,
     Problem,
 )
-from service.store.base import validate_key
 from service.submissions import scene_from_json, scene_from_upload
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])

@@ -16,13 +16,13 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 
-from hgrender.imaging import TONE_MAPS
+from hgcore.imaging import TONE_MAPS
+from hgcore.store.base import ArtifactNotFoundError
 from schemas import EXAMPLES_DIR
 from service.api.deps import JobsDep, Reader, visible_job
 from service.api.routes.jobs import _ERRORS, JobId
 from service.jobs import JobConflictError
 from service.models import JobStatus, Problem
-from service.store.base import ArtifactNotFoundError
 from service.viewer_data import (
     COMPARE_MODES,
     DecodedImage,
@@ -218,7 +218,7 @@ async def get_display_png(
     ev: ExposureEV = 0.0,
     tonemap: ToneMap = "clamp",
 ) -> Response:
-    """`hgrender.imaging.display_rgb8(rgb, ev, tonemap)` of the full-resolution image."""
+    """`hgcore.imaging.display_rgb8(rgb, ev, tonemap)` of the full-resolution image."""
     image = await _image(request, jobs, principal, job_id)
     return Response(await run_in_threadpool(display_png, image, ev, tonemap), media_type="image/png")
 

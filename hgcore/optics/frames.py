@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.optics.array_ops import NUMPY, ArrayOps
+from hgcore.optics.array_ops import NUMPY, ArrayOps
 
 Vector3 = tuple[Any, Any, Any]
 

@@ -40,10 +40,10 @@ from rq.job import Job, JobStatus
 from rq.registry import StartedJobRegistry
 from rq.utils import now
 
-from service.core.config import QUEUE_NAMES, Settings
-from service.core.redis_clients import redis_client
+from hgcore.redis_clients import redis_client
+from hgcore.settings import QUEUE_NAMES, Settings
+from hgcore.store import store_from_settings
 from service.jobs import FINAL_STEP_TASKS, JobService
-from service.store import store_from_settings
 
 
 class RenderWorker(Worker):

@@ -1,6 +1,6 @@
 """Spectral complex refractive index η(λ) = n(λ) + iκ(λ) of common metals and glasses (NumPy).
 
-Metals (silver, gold, copper, aluminium): tabulated n, κ in ``worker/optics/data/ior_<metal>.csv`` from
+Metals (silver, gold, copper, aluminium): tabulated n, κ in ``hgcore/optics/data/ior_<metal>.csv`` from
 E. D. Palik (ed.), *Handbook of Optical Constants of Solids*, Academic Press, 1985, via the LuxPop database,
 as distributed with Mitsuba 3 (``data/ior/*.spd``); linearly interpolated in wavelength, valid only inside
 the tabulated range (≈ 299–886 nm).
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from worker.optics.spectra import load_data_csv
+from hgcore.optics.spectra import load_data_csv
 
 # The project-wide wavelength window (issue 2): anything outside is rejected before a material is consulted.
 MIN_WAVELENGTH_NM = 200.0

@@ -25,7 +25,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from worker.optics.array_ops import NUMPY, ArrayOps
+from hgcore.optics.array_ops import NUMPY, ArrayOps
 
 MultiIndex = tuple[int, ...]
 Matrix = Sequence[Sequence[Any]]

@@ -13,7 +13,7 @@ from typing import Any
 import boto3
 from botocore.exceptions import ClientError
 
-from service.store.base import ArtifactInfo, ArtifactNotFoundError, ArtifactStore, validate_key
+from hgcore.store.base import ArtifactInfo, ArtifactNotFoundError, ArtifactStore, validate_key
 
 
 class S3Store(ArtifactStore):

@@ -1,7 +1,7 @@
 """Partially-coherent reflectance of a thin dielectric film over a substrate: Eq. (18) generalised to P beams.
 
 Layers: exterior (real index n_0) | film (real index n_f, thickness τ in m) | substrate (η_s = n + iκ,
-dielectric or conductor). With the interface amplitudes of ``worker.optics.fresnel`` (per polarisation) the
+dielectric or conductor). With the interface amplitudes of ``hgcore.optics.fresnel`` (per polarisation) the
 beams leaving the film are
 
     a_0 = r_01,    a_p = t_01 t_10 r_12 (r_10 r_12)^{p−1} e^{i p δ}  (p ≥ 1),    δ = 2 k q_1 τ,
@@ -26,9 +26,9 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from worker.optics.array_ops import ArrayOps
-from worker.optics.complex_pair import ComplexPair
-from worker.optics.fresnel import interface_amplitudes, normal_factor
+from hgcore.optics.array_ops import ArrayOps
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.fresnel import interface_amplitudes, normal_factor
 
 
 def gaussian_visibilities(first_visibility: Any, count: int, ops: ArrayOps) -> list[Any]:

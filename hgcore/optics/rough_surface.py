@@ -39,7 +39,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from worker.optics.array_ops import ArrayOps
+from hgcore.optics.array_ops import ArrayOps
 
 PsdModel = Literal["gaussian", "abc"]
 
@@ -218,7 +218,7 @@ def rough_transmission_eval(
     """Scattered BTDF f_t [1/sr] (without |cos θ_t|) into the lower half-space (wt[2] < 0).
 
     ``transmittance`` is T(θ_i) = 1 − R and ``cos_theta_t_specular`` the specular refraction cosine, both from
-    :func:`worker.optics.fresnel.fresnel_dielectric` with η = n_t/n_i.
+    :func:`hgcore.optics.fresnel.fresnel_dielectric` with η = n_t/n_i.
     """
     g_t = transmission_roughness_exponent(
         surface.rms_height_m, wi[2], cos_theta_t_specular, wavelength_m, exterior_ior, interior_ior

@@ -3,7 +3,7 @@
 A volume holds N point particles at p_j (m) with real, non-negative scattering coefficients a_j, so
 σ(r) = Σ_j a_j δ³(r − p_j). Light arrives from a source at distance s (m) with transverse covariance Σ'
 (m², in the incident beam's transverse frame (e_1, e_2)) and whitened HG coefficients ĉ (those of
-``worker.optics.sources.source_coefficients``; ĉ_00 = √π is the 0th mode).
+``hgcore.optics.sources.source_coefficients``; ĉ_00 = √π is the 0th mode).
 
 Eq. (22), the interference term of Theorem 5.1(i): the speckle intensity at the scattering vector
 φ = k(r̂ + ŝ) (rad/m) is
@@ -11,7 +11,7 @@ Eq. (22), the interference term of Theorem 5.1(i): the speckle intensity at the 
     I(φ) = Σ_{j,l} μ(p_l − p_j) a_j a_l e^{−i(p_l − p_j)·φ} = Σ_{j,l} μ(p_l − p_j) a_j a_l cos((p_l − p_j)·φ),
 
 where μ(d) is the incident degree of coherence at the transverse part of the separation d (the incident HG
-expansion evaluated at kQ'd/s; ``worker.optics.coherence.degree_of_coherence``); μ is even, so I is real.
+expansion evaluated at kQ'd/s; ``hgcore.optics.coherence.degree_of_coherence``); μ is even, so I is real.
 Full coherence (μ ≡ 1) gives the fully developed speckle |Σ_j a_j e^{−ip_j·φ}|²; incoherent light (μ = δ)
 gives Σ_j a_j²; averaging over particle positions gives the incoherent sum where the positions' characteristic
 function vanishes.
@@ -36,9 +36,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from worker.optics.array_ops import NUMPY
-from worker.optics.coherence import degree_of_coherence
-from worker.optics.hg import hg_functions
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.coherence import degree_of_coherence
+from hgcore.optics.hg import hg_functions
 
 
 def _validated_particles(positions_m: np.ndarray, amplitudes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from worker.optics.array_ops import ArrayOps
+from hgcore.optics.array_ops import ArrayOps
 
 
 @dataclass(frozen=True)

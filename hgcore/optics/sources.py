@@ -48,9 +48,9 @@ from typing import Any
 import numpy as np
 from scipy.special import j1
 
-from worker.optics.array_ops import NUMPY, ArrayOps, hermite_functions
-from worker.optics.expansion import project_csd
-from worker.optics.frames import Vector3, cross3, dot3, transverse_frame, unit_vector
+from hgcore.optics.array_ops import NUMPY, ArrayOps, hermite_functions
+from hgcore.optics.expansion import project_csd
+from hgcore.optics.frames import Vector3, cross3, dot3, transverse_frame, unit_vector
 
 SOURCE_KINDS = ("sphere", "cylinder", "disk", "rect", "gaussian")
 # Which universal angular-coherence function each source kind is expanded with (module docstring).

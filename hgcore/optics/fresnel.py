@@ -18,8 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from worker.optics.array_ops import ArrayOps
-from worker.optics.complex_pair import ComplexPair
+from hgcore.optics.array_ops import ArrayOps
+from hgcore.optics.complex_pair import ComplexPair
 
 
 @dataclass(frozen=True)

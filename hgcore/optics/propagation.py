@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from worker.optics.array_ops import NUMPY, ArrayOps
-from worker.optics.coherence import (
+from hgcore.optics.array_ops import NUMPY, ArrayOps
+from hgcore.optics.coherence import (
     DEFAULT_WAVELENGTH_M,
     CoherenceDiagnostics,
     coherence_diagnostics,
@@ -32,8 +32,8 @@ from worker.optics.coherence import (
     shape_matrix_from_covariance,
     symmetric_2x2,
 )
-from worker.optics.frames import unit_vector
-from worker.optics.sources import TransverseCovariance
+from hgcore.optics.frames import unit_vector
+from hgcore.optics.sources import TransverseCovariance
 
 
 def _rotation_between(source: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ n = 64 leaves errors at the 1e-10 level for the orders ≤ 16 used here (tests c
 
 Coefficients of a physical CSD come out real, and those of odd order vanish when f is even (§4, "The HG
 coefficients are real and of even order"); ``project_csd`` therefore projects onto the even-order transverse
-modes of ``worker.optics.array_ops.transverse_modes`` only, and ``project_onto`` onto any list of degrees.
+modes of ``hgcore.optics.array_ops.transverse_modes`` only, and ``project_onto`` onto any list of degrees.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from worker.optics.array_ops import NUMPY, ArrayOps, transverse_modes
-from worker.optics.hg import MultiIndex, dual_hg_functions, hg_functions
+from hgcore.optics.array_ops import NUMPY, ArrayOps, transverse_modes
+from hgcore.optics.hg import MultiIndex, dual_hg_functions, hg_functions
 
 DEFAULT_QUADRATURE_POINTS = 64
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from service.core.config import Settings
-from service.store.base import ArtifactInfo, ArtifactNotFoundError, ArtifactStore, validate_key
-from service.store.filesystem import FilesystemStore
+from hgcore.settings import Settings
+from hgcore.store.base import ArtifactInfo, ArtifactNotFoundError, ArtifactStore, validate_key
+from hgcore.store.filesystem import FilesystemStore
 
 __all__ = [
     "ArtifactInfo",
@@ -19,7 +19,7 @@ __all__ = [
 def store_from_settings(settings: Settings) -> ArtifactStore:
     """The store the settings name (boto3 is imported only for ``s3``)."""
     if settings.store == "s3":
-        from service.store.s3 import S3Store
+        from hgcore.store.s3 import S3Store
 
         assert settings.s3_bucket is not None  # enforced by Settings
         return S3Store(

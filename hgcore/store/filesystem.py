@@ -12,7 +12,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from service.store.base import ArtifactInfo, ArtifactNotFoundError, ArtifactStore, validate_key
+from hgcore.store.base import ArtifactInfo, ArtifactNotFoundError, ArtifactStore, validate_key
 
 
 class FilesystemStore(ArtifactStore):

@@ -1,6 +1,6 @@
 """Array namespaces that let one formula run on NumPy arrays and inside Dr.Jit kernels.
 
-Every optics formula in ``worker.optics`` is written once against an ``ArrayOps`` namespace ``ops``:
+Every optics formula in ``hgcore.optics`` is written once against an ``ArrayOps`` namespace ``ops``:
 ``NUMPY`` for the reference implementation and tests, ``DRJIT`` inside Mitsuba's ``llvm_ad_*`` /
 ``cuda_ad_*`` symbolic loops. Only element-wise operations are used, so the same code vectorises in both.
 """

@@ -15,7 +15,7 @@ Conventions (docs/physics.md):
   principal frame of Σ (u_i = √λ_i (e_i · k/r ξ), λ₁ ≥ λ₂ eigenvalues of Σ with unit eigenvectors e_i) and
   h_n are normalised 1-D Hermite functions. This is Σ c_nm Ψ^Θ_nm(k/r ξ) with the factor
   |Θ|^{-1/4} Π θ_i^{-α_i/2} of Eq. (5) folded into the universal coefficients ĉ
-  (see ``worker.optics.sources``), so nothing over- or underflows in single precision.
+  (see ``hgcore.optics.sources``), so nothing over- or underflows in single precision.
 
 Component functions (``*_components``, ``degree_of_coherence``) take scalars or arrays and an ``ops``
 namespace so that they run on NumPy arrays and inside Dr.Jit kernels; matrices are passed as their entries.
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from worker.optics.array_ops import NUMPY, ArrayOps, hermite_functions
+from hgcore.optics.array_ops import NUMPY, ArrayOps, hermite_functions
 
 DEFAULT_WAVELENGTH_M = 550e-9
 METRES_TO_MICRONS = 1e6
@@ -236,7 +236,7 @@ def degree_of_coherence(
 
     ``xi_m`` = (ξ_x, ξ_y) in metres and ``sigma_m2`` = (Σ_xx, Σ_xy, Σ_yy) in m², both in the beam's transverse
     frame; ``r_m`` the propagation distance (m); ``coefficients`` the universal whitened-basis coefficients
-    ĉ_nm of ``worker.optics.sources.source_coefficients`` (normalised so that μ(0) = 1). u is the whitened
+    ĉ_nm of ``hgcore.optics.sources.source_coefficients`` (normalised so that μ(0) = 1). u is the whitened
     argument k/r·ξ in Σ's principal frame (module docstring). With the single coefficient ĉ₀₀ = √π this is
     exactly exp(−½ ξᵀMξ), M = (k/r)²Σ⊥ — van Cittert–Zernike for a Gaussian source.
     """

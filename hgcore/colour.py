@@ -1,7 +1,7 @@
 """Colour science for comparing renders: band spectra or linear sRGB → CIE XYZ → CIELAB (D65) → CIEDE2000.
 
 * XYZ of a band image: X = Σ_b L_b ∫_band x̄(λ) dλ (and likewise Y, Z) for equal-width bands given by their
-  centres, with the CIE 1931 2° colour-matching functions of ``worker.optics.spectra.cie_cmf`` (NumPy only).
+  centres, with the CIE 1931 2° colour-matching functions of ``hgcore.optics.spectra.cie_cmf`` (NumPy only).
   Units: L_b in W·m⁻²·sr⁻¹·nm⁻¹ gives XYZ in W·m⁻²·sr⁻¹ (scaled later by the reference white).
 * CIELAB (CIE 15:2004 §8.2.1): L* = 116 f(Y/Yn) − 16, a* = 500 [f(X/Xn) − f(Y/Yn)], b* = 200 [f(Y/Yn) −
   f(Z/Zn)], f(t) = t^⅓ above (6/29)³ and t/(3 (6/29)²) + 4/29 below; white (Xn, Yn, Zn) = D65 scaled to Yn.
@@ -10,15 +10,15 @@
   branches compare |h′₁ − h′₂| with 180° up to 1e-9° because that difference is exactly 180° in exact
   arithmetic for the antipodal pairs of Sharma's table (pair 14), and rounding must not pick a branch.
 * Linear sRGB → XYZ: IEC 61966-2-1:1999 §5.2 (D65 white; rows sum to the white point), and the display ΔE₀₀
-  of two linear-sRGB images after the viewer's exposure and tone map (``hgrender.imaging``).
+  of two linear-sRGB images after the viewer's exposure and tone map (``hgcore.imaging``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from hgrender.imaging import tone_map
-from worker.optics.spectra import cie_cmf
+from hgcore.imaging import tone_map
+from hgcore.optics.spectra import cie_cmf
 
 D65_WHITE_XYZ: np.ndarray = np.array([0.95047, 1.0, 1.08883])
 """CIE D65 white point (2° observer), normalised to Y = 1 (CIE 15:2004 Table T.3)."""

@@ -27,7 +27,7 @@ the source grows: the dimmed secondary lobes of Fig. 1(f); under full coherence,
 intrinsic one). The literal product S(φ⊥)·Ψ̃(φ⊥) would instead attenuate lobes *more* under *more* coherence.
 The 0th order is a specular delta of efficiency η_00 that keeps the incident coherence (the caller's).
 
-With several incident modes (whitened coefficients ĉ_nm of ``worker.optics.coherence``) the lobe shape is the
+With several incident modes (whitened coefficients ĉ_nm of ``hgcore.optics.coherence``) the lobe shape is the
 FT of the modal degree of coherence, (1/2π) Σ ĉ_nm (−1)^{(n+m)/2} h_n(v₁) h_m(v₂) per unit whitened area,
 with v the C_β-whitened offset β_o − β_pq (exact for one mode; with more modes the intrinsic broadening is
 folded into the whitening). Truncated expansions can dip below zero in the tails; the shape is clamped at 0.
@@ -41,9 +41,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from worker.optics.array_ops import ArrayOps, hermite_functions
-from worker.optics.coherence import max_degree, principal_axes_components
-from worker.optics.rough_surface import hemisphere_direction
+from hgcore.optics.array_ops import ArrayOps, hermite_functions
+from hgcore.optics.coherence import max_degree, principal_axes_components
+from hgcore.optics.rough_surface import hemisphere_direction
 
 METRES_PER_MICRON = 1e-6
 

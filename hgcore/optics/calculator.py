@@ -4,7 +4,7 @@ Backs ``hgrender coherence`` and the service's ``POST /v1/coherence``; it uses N
 or Dr.Jit). For a source kind and size seen along ``direction`` from ``distance_m`` away it returns Σ⊥ (m²),
 Θ = Σ⊥⁻¹ (1/m², Lemma 4.4 with its sign), M = (k/r)²Σ⊥ (1/m²), the BRIEF's diagnostics ℓ₁, ℓ₂ (µm),
 anisotropy, angle (rad), area (µm²) at ``wavelength_nm``, and the HG coefficients of Eq. (14) in the
-whitened basis of ``worker.optics.sources`` (normalised so that μ(0) = 1).
+whitened basis of ``hgcore.optics.sources`` (normalised so that μ(0) = 1).
 """
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from worker.optics.coherence import (
+from hgcore.optics.coherence import (
     coherence_diagnostics,
     require_positive_definite,
     shape_matrix_from_covariance,
 )
-from worker.optics.sources import (
+from hgcore.optics.sources import (
     MAX_MODES,
     SOURCE_KINDS,
     positive_size,
