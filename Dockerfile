@@ -24,6 +24,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
 WORKDIR /app
 # Dependencies first (cached layer): versions are pinned by pyproject.toml (mitsuba==3.9.1, drjit==1.5.0).
 COPY pyproject.toml README.md ./
+COPY hgcore ./hgcore
 COPY hgrender ./hgrender
 COPY service ./service
 COPY worker ./worker

@@ -67,7 +67,7 @@ def main(count: int = SAMPLE_COUNT, repeats: int = WARM_REPEATS) -> dict[str, An
     import drjit as dr
     from drjit.llvm import Float
 
-    from hgcore.optics.array_ops import drjit_ops
+    from worker.render.drjit_ops import drjit_ops
 
     dr.set_thread_count(1)  # before the first kernel: one core, as the targets assume
     ops = drjit_ops()

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from worker.render.output import atomic_write_bytes
+from hgcore.artifacts.images import atomic_write_bytes
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 REFERENCE_ITERATIONS = 2_000_000

@@ -9,28 +9,40 @@
   Eqs. (1)–(22), with k_L = k_C = k_H = 1. Hue angles are in degrees; the hue-difference and mean-hue
   branches compare |h′₁ − h′₂| with 180° up to 1e-9° because that difference is exactly 180° in exact
   arithmetic for the antipodal pairs of Sharma's table (pair 14), and rounding must not pick a branch.
-* Linear sRGB → XYZ: IEC 61966-2-1:1999 §5.2 (D65 white; rows sum to the white point), and the display ΔE₀₀
-  of two linear-sRGB images after the viewer's exposure and tone map (``hgcore.imaging``).
+* Linear sRGB ↔ XYZ: IEC 61966-2-1:1999, computed at full precision from the primaries' and the D65
+  white's chromaticities (the standard's printed matrices are these rounded); one pair for the renderer's
+  RGB channels, the viewer and the regression metrics.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from hgcore.imaging import tone_map
 from hgcore.optics.spectra import cie_cmf
 
-D65_WHITE_XYZ: np.ndarray = np.array([0.95047, 1.0, 1.08883])
-"""CIE D65 white point (2° observer), normalised to Y = 1 (CIE 15:2004 Table T.3)."""
+SRGB_PRIMARIES_XY: np.ndarray = np.array([[0.64, 0.33], [0.30, 0.60], [0.15, 0.06]])
+"""IEC 61966-2-1 (ITU-R BT.709) chromaticities of the R, G, B primaries."""
+D65_WHITE_XY: tuple[float, float] = (0.3127, 0.3290)
+"""The sRGB white point's chromaticity (IEC 61966-2-1 Table 1)."""
 
-LINEAR_SRGB_TO_XYZ: np.ndarray = np.array(
-    [
-        [0.4124564, 0.3575761, 0.1804375],
-        [0.2126729, 0.7151522, 0.0721750],
-        [0.0193339, 0.1191920, 0.9503041],
-    ]
-)
-"""IEC 61966-2-1 linear sRGB → CIE XYZ (D65), to 7 digits."""
+
+def _xy_to_xyz(x: float, y: float) -> np.ndarray:
+    return np.array([x / y, 1.0, (1.0 - x - y) / y])
+
+
+def _rgb_to_xyz_matrix(primaries_xy: np.ndarray, white_xy: tuple[float, float]) -> np.ndarray:
+    """The matrix whose columns are the primaries' XYZ, scaled so that RGB = (1, 1, 1) is the white."""
+    primaries = np.stack([_xy_to_xyz(x, y) for x, y in primaries_xy], axis=1)
+    return primaries * np.linalg.solve(primaries, _xy_to_xyz(*white_xy))
+
+
+D65_WHITE_XYZ: np.ndarray = _xy_to_xyz(*D65_WHITE_XY)
+"""D65 white of sRGB normalised to Y = 1 (0.950456, 1, 1.089058): the XYZ of linear sRGB (1, 1, 1)."""
+LINEAR_SRGB_TO_XYZ: np.ndarray = _rgb_to_xyz_matrix(SRGB_PRIMARIES_XY, D65_WHITE_XY)
+"""Linear sRGB → CIE XYZ at full float64 precision from the primaries and white (row 1 = 0.4123908,
+0.3575843, 0.1804808; IEC 61966-2-1 prints it rounded to 4 decimals)."""
+XYZ_TO_LINEAR_SRGB: np.ndarray = np.linalg.inv(LINEAR_SRGB_TO_XYZ)
+"""CIE XYZ → linear sRGB, the exact inverse (row 1 = 3.2409699, −1.5373832, −0.4986108)."""
 
 _HUE_TIE_DEG = 1e-9
 _LAB_EPSILON = (6.0 / 29.0) ** 3
@@ -92,20 +104,19 @@ def linear_srgb_to_xyz(linear_rgb: np.ndarray) -> np.ndarray:
     return values @ LINEAR_SRGB_TO_XYZ.T
 
 
-def linear_srgb_to_lab(linear_rgb: np.ndarray) -> np.ndarray:
-    """CIELAB (D65 white, Y = 1) of linear sRGB values, last axis of size 3."""
-    return xyz_to_lab(linear_srgb_to_xyz(linear_rgb), D65_WHITE_XYZ)
+def xyz_to_linear_srgb(xyz: np.ndarray) -> np.ndarray:
+    """Linear sRGB (no transfer curve) of CIE XYZ values, last axis of size 3."""
+    values = np.asarray(xyz, dtype=float)
+    if values.shape[-1] != 3:
+        raise ValueError(f"xyz: last axis must have size 3, got shape {values.shape}")
+    return values @ XYZ_TO_LINEAR_SRGB.T
 
 
-def delta_e00_display(
-    reference_rgb: np.ndarray, sample_rgb: np.ndarray, exposure_ev: float, tonemap: str
-) -> np.ndarray:
-    """Per-pixel ΔE₀₀ of two linear-sRGB images (..., 3) as displayed: × 2^EV, tone map, then CIELAB
-    with the display white (1, 1, 1) as reference white; shape (...)."""
-    scale = 2.0**exposure_ev
-    reference = tone_map(np.asarray(reference_rgb, dtype=float) * scale, tonemap)
-    sample = tone_map(np.asarray(sample_rgb, dtype=float) * scale, tonemap)
-    return ciede2000(linear_srgb_to_lab(reference), linear_srgb_to_lab(sample))
+def linear_srgb_to_lab(linear_rgb: np.ndarray, white_level: float = 1.0) -> np.ndarray:
+    """CIELAB (D65) of linear sRGB values (last axis 3); the grey (w, w, w), w = ``white_level``, is white."""
+    if not white_level > 0.0:
+        raise ValueError(f"white_level: must be positive, got {white_level}")
+    return xyz_to_lab(linear_srgb_to_xyz(linear_rgb), D65_WHITE_XYZ * white_level)
 
 
 def ciede2000(lab_reference: np.ndarray, lab_sample: np.ndarray) -> np.ndarray:

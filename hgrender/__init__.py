@@ -1,3 +1,5 @@
-"""hgrender: partially-coherent light rendering in Hermite-Gauss space."""
+"""hgrender: partially-coherent light rendering in Hermite-Gauss space (the command line)."""
 
-__version__ = "0.1.0"
+from hgcore import __version__
+
+__all__ = ["__version__"]

@@ -16,12 +16,12 @@ import math
 
 import numpy as np
 
+from hgcore.colour import xyz_to_linear_srgb
 from hgcore.optics.spectra import (
     cie_cmf,
     cie_illuminant,
     planck_radiance,
     spectrum_to_xyz,
-    xyz_to_linear_srgb,
 )
 from schemas.scene import (
     BlackbodySpectrum,

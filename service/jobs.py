@@ -40,6 +40,7 @@ from rq.job import Dependency
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
+from hgcore.artifacts.keys import input_key, job_prefix, manifest_key, scene_key
 from hgcore.settings import Settings
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 from service.models import (
@@ -128,19 +129,6 @@ def rq_ids(job_id: str, chunk_count: int) -> list[str]:
     return [*chunk_ids, merge_rq_id(job_id)]
 
 
-def scene_key(job_id: str) -> str:
-    """Store key of the scene's provenance copy, written with the final artifacts."""
-    return f"jobs/{job_id}/scene.json"
-
-
-def chunk_key(job_id: str, index: int) -> str:
-    return f"jobs/{job_id}/chunks/{index}.npz"
-
-
-def artifact_prefix(job_id: str) -> str:
-    return f"jobs/{job_id}/"
-
-
 def _decode(mapping: Mapping[bytes, bytes]) -> dict[str, str]:
     return {k.decode(): v.decode() for k, v in mapping.items()}
 
@@ -205,7 +193,7 @@ class JobService:
             if earlier is not None:
                 return earlier, False
         for relative_name, data in (extra_files or {}).items():
-            self.store.put_bytes(f"jobs/{job_id}/input/{relative_name}", data)
+            self.store.put_bytes(input_key(job_id, relative_name), data)
         now = time.time()
         record = {
             "id": job_id,
@@ -226,7 +214,7 @@ class JobService:
         try:
             self._commit(job_id, owner, record, scene, chunk_count, priority, now)
         except Exception:
-            self.store.delete_prefix(artifact_prefix(job_id))  # uploaded bundle files, if any
+            self.store.delete_prefix(job_prefix(job_id))  # uploaded bundle files, if any
             raise
         view = build_view(record, {f"{i}.status": "queued" for i in range(chunk_count)}, now)
         return view, True
@@ -361,7 +349,7 @@ class JobService:
         if not job_id.isalnum():
             return None
         try:
-            manifest = json.loads(self.store.get_bytes(f"jobs/{job_id}/manifest.json"))
+            manifest = json.loads(self.store.get_bytes(manifest_key(job_id)))
         except (ArtifactNotFoundError, ValueError):
             return None
         return JobView.model_validate(manifest["job"])
@@ -467,7 +455,7 @@ class JobService:
                 pipe.zrem(_OWNER_INDEX_KEY.format(record["owner"]), job_id)
                 pipe.hincrby(_BY_STATE_KEY, record["status"], -1)
             pipe.execute()
-        self.store.delete_prefix(artifact_prefix(job_id))
+        self.store.delete_prefix(job_prefix(job_id))
 
     # ---- worker-side bookkeeping ----------------------------------------------------------------------
 

@@ -12,10 +12,10 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
+from hgcore import __version__
 from hgcore.redis_clients import async_redis_client, redis_client
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
-from hgrender import __version__
 from schemas import SceneLimits
 from service.api.errors import install_exception_handlers
 from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware

@@ -29,16 +29,27 @@ from typing import Any, Literal
 
 import numpy as np
 
-from hgcore.colour import D65_WHITE_XYZ, ciede2000, xyz_to_lab
+from hgcore.artifacts.exr import read_exr
+from hgcore.artifacts.images import image_channels, images_from_sums
+from hgcore.artifacts.keys import artifact_key, chunks_prefix
+from hgcore.artifacts.layout import (
+    CHUNK_PARTIAL_SUFFIX,
+    COHERENCE_DIAGNOSTICS,
+    COHERENCE_PREFIX,
+    COHERENCE_WEIGHT,
+    IMAGE_EXR,
+    RGB_CHANNELS,
+    BandLayout,
+    coherence_channel,
+    is_spectral_channel,
+    spectral_channel_wavelength_nm,
+)
+from hgcore.artifacts.pixel_sums import PixelSums, read_partial
+from hgcore.colour import D65_WHITE_XYZ, LINEAR_SRGB_TO_XYZ, ciede2000, xyz_to_lab
 from hgcore.imaging import REC709_LUMINANCE, display_rgb8, tone_map
-from hgcore.optics.spectra import XYZ_TO_LINEAR_SRGB
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 
-IMAGE_ARTIFACT = "image.exr"
-BAND_PREFIX = "S0."
 RGB_LAYER = "rgb"
-COHERENCE_LAYERS = ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy")
-LINEAR_SRGB_TO_XYZ = np.linalg.inv(XYZ_TO_LINEAR_SRGB)
 RADIANCE_UNIT = "W·m⁻²·sr⁻¹·nm⁻¹"
 _UNITS = {
     "coherence.l1_um": "µm",
@@ -57,20 +68,13 @@ CompareMode = Literal["abs", "rel", "de2000"]
 COMPARE_MODES: tuple[str, ...] = ("abs", "rel", "de2000")
 
 
-def band_wavelength_nm(channel: str) -> float:
-    """The wavelength (nm) of a spectral channel name ``S0.<λ>nm`` (comma decimal separator)."""
-    if not (channel.startswith(BAND_PREFIX) and channel.endswith("nm")):
-        raise ValueError(f"name: {channel!r} is not a spectral channel S0.<wavelength>nm")
-    return float(channel[len(BAND_PREFIX) : -2].replace(",", "."))
-
-
 def layer_kind(name: str) -> str:
     """``rgb``, ``band``, ``coherence`` or ``geometry`` (depth, normals, albedo)."""
     if name in (RGB_LAYER, "R", "G", "B"):
         return "rgb"
-    if name.startswith(BAND_PREFIX):
+    if is_spectral_channel(name):
         return "band"
-    if name.startswith("coherence."):
+    if name.startswith(COHERENCE_PREFIX):
         return "coherence"
     return "geometry"
 
@@ -117,7 +121,7 @@ class DecodedImage:
     @property
     def covered(self) -> np.ndarray:
         """Pixels that carry coherence diagnostics (``coherence.weight`` > 0)."""
-        weight = self.channels.get("coherence.weight")
+        weight = self.channels.get(COHERENCE_WEIGHT)
         if weight is None:
             return np.zeros((self.height, self.width), dtype=bool)
         return weight > 0
@@ -135,12 +139,12 @@ class DecodedImage:
         if self._layers is None:
             covered = self.covered
             names = [RGB_LAYER, *self.band_names]
-            names += [n for n in sorted(self.channels) if n.startswith("coherence.")]
+            names += [n for n in sorted(self.channels) if n.startswith(COHERENCE_PREFIX)]
             names += [n for n in sorted(self.channels) if layer_kind(n) == "geometry"]
             infos = []
             for name in names:
                 values = self.layer(name)
-                if layer_kind(name) == "coherence" and name != "coherence.weight":
+                if layer_kind(name) == "coherence" and name != COHERENCE_WEIGHT:
                     values = values[covered]
                 values = values[np.isfinite(values)]
                 if values.size:
@@ -148,7 +152,7 @@ class DecodedImage:
                     stats = (float(values.min()), float(values.max()), low, high)
                 else:
                     stats = (None, None, None, None)
-                wavelength = band_wavelength_nm(name) if layer_kind(name) == "band" else None
+                wavelength = spectral_channel_wavelength_nm(name) if layer_kind(name) == "band" else None
                 channel_count = 3 if name == RGB_LAYER else 1
                 infos.append(
                     LayerInfo(name, layer_kind(name), layer_unit(name), wavelength, channel_count, *stats)
@@ -159,46 +163,28 @@ class DecodedImage:
 
 def decode_exr(path: Path) -> DecodedImage:
     """Read every channel of an EXR (first subimage) as float32 (H, W) arrays."""
-    import OpenImageIO as oiio
-
-    image_input = oiio.ImageInput.open(str(path))
-    if image_input is None:
-        raise OSError(f"cannot read {path}: {oiio.geterror()}")
-    try:
-        spec = image_input.spec()
-        pixels = image_input.read_image(format="float")
-    finally:
-        image_input.close()
-    if pixels is None:
-        raise OSError(f"cannot read {path}: {oiio.geterror()}")
-    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
-    channels = {name: np.ascontiguousarray(pixels[..., i]) for i, name in enumerate(spec.channelnames)}
-    return _decoded(spec.width, spec.height, channels)
+    image = read_exr(path)
+    return _decoded(image.width, image.height, image.channels)
 
 
 def _decoded(width: int, height: int, channels: dict[str, np.ndarray], partial: bool = False) -> DecodedImage:
-    band_names = sorted((n for n in channels if n.startswith(BAND_PREFIX)), key=band_wavelength_nm)
+    band_names = sorted((n for n in channels if is_spectral_channel(n)), key=spectral_channel_wavelength_nm)
     return DecodedImage(
         width=width,
         height=height,
         channels=channels,
         band_names=band_names,
-        wavelengths_nm=[band_wavelength_nm(n) for n in band_names],
+        wavelengths_nm=[spectral_channel_wavelength_nm(n) for n in band_names],
         partial=partial,
     )
 
 
 def merge_partials(paths: list[Path], film: dict[str, Any]) -> DecodedImage:
     """The image of the chunk partials finished so far (a running job's preview): the renderer's own
-    merge of per-pixel sums (``worker.render.output``, NumPy only), without writing anything."""
-    from hgcore.pixel_sums import PixelSums
-    from worker.render.output import image_channels, images_from_sums
-    from worker.render.spectral import BandLayout
-
+    merge of per-pixel sums (``hgcore.artifacts.images``), without writing anything."""
     total: PixelSums | None = None
     for path in paths:
-        with np.load(path) as data:
-            sums = PixelSums.from_arrays({key: data[key] for key in data.files})
+        sums, _ = read_partial(path)
         total = sums if total is None else total.add(sums)
     if total is None:
         raise ArtifactNotFoundError("chunks")
@@ -228,17 +214,17 @@ class DecodedImageCache:
 
     def get(self, job_id: str) -> DecodedImage:
         """The job's decoded image; ArtifactNotFoundError while the job has none (not finished)."""
-        key = f"jobs/{job_id}/{IMAGE_ARTIFACT}"
+        key = artifact_key(job_id, IMAGE_EXR)
         listed = [info for info in self.store.list(key) if info.key == key]
         if not listed:
-            raise ArtifactNotFoundError(IMAGE_ARTIFACT)
+            raise ArtifactNotFoundError(IMAGE_EXR)
         cache_key = (job_id, listed[0].size_bytes)
         with self._lock:
             if cache_key in self._images:
                 self._images.move_to_end(cache_key)
                 return self._images[cache_key]
         with tempfile.TemporaryDirectory(prefix="hgrender-viewer-") as directory:
-            path = Path(directory) / IMAGE_ARTIFACT
+            path = Path(directory) / IMAGE_EXR
             self.store.get_file(key, path)
             image = decode_exr(path)
         with self._lock:
@@ -250,9 +236,10 @@ class DecodedImageCache:
 
     def get_partial(self, job_id: str, film: dict[str, Any]) -> DecodedImage:
         """A running job's preview from its finished chunk partials; ArtifactNotFoundError when none."""
-        prefix = f"jobs/{job_id}/chunks/"
+        prefix = chunks_prefix(job_id)
         listed = sorted(
-            (info for info in self.store.list(prefix) if info.key.endswith(".npz")), key=lambda i: i.key
+            (info for info in self.store.list(prefix) if info.key.endswith(CHUNK_PARTIAL_SUFFIX)),
+            key=lambda i: i.key,
         )
         if not listed:
             raise ArtifactNotFoundError("chunks")
@@ -331,17 +318,17 @@ def pixel_record(image: DecodedImage, x: int, y: int) -> dict[str, object]:
         return float(channel[y, x])
 
     covered = bool(image.covered[y, x])
-    coherence = {name: value(f"coherence.{name}") if covered else None for name in COHERENCE_LAYERS}
+    coherence = {name: value(coherence_channel(name)) if covered else None for name in COHERENCE_DIAGNOSTICS}
     return {
         "x": x,
         "y": y,
         "wavelengths_nm": image.wavelengths_nm,
         "spectrum": [value(name) for name in image.band_names],
         "spectrum_unit": RADIANCE_UNIT,
-        "rgb": [value(c) for c in "RGB"],
+        "rgb": [value(c) for c in RGB_CHANNELS],
         "coherence_covered": covered,
         "coherence": coherence,
-        "coherence_weight": value("coherence.weight"),
+        "coherence_weight": value(COHERENCE_WEIGHT),
         "depth_m": value("depth"),
         "normal": [value(f"normal.{a}") for a in "XYZ"],
         "albedo": [value(f"albedo.{c}") for c in "RGB"],
@@ -370,7 +357,7 @@ def ellipse_grid(image: DecodedImage, spacing_px: int) -> list[dict[str, float]]
             if not covered[y, x]:
                 continue
             values = {
-                name: float(image.channels[f"coherence.{name}"][y, x])
+                name: float(image.channels[coherence_channel(name)][y, x])
                 for name in ("l1_um", "l2_um", "angle", "area_um2")
             }
             if all(math.isfinite(v) for v in values.values()):

@@ -31,6 +31,15 @@ def find_libllvm() -> str | None:
     return None
 
 
+def point_drjit_at_libllvm() -> None:
+    """Set ``DRJIT_LIBLLVM_PATH`` to libLLVM 19 unless the environment names one; Dr.Jit reads it when it is
+    first imported, so this runs before any ``import drjit`` or ``import mitsuba``."""
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        libllvm = find_libllvm()
+        if libllvm is not None:
+            os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+
+
 def _cuda_available(mitsuba: ModuleType) -> bool:
     if "cuda_ad_spectral" not in mitsuba.variants():
         return False
@@ -47,10 +56,7 @@ def load_mitsuba(variant: str | None = None) -> ModuleType:
 
     ``variant`` (or ``HGRENDER_VARIANT``) may be ``auto`` or one of ``SUPPORTED_VARIANTS``.
     """
-    if "DRJIT_LIBLLVM_PATH" not in os.environ:
-        libllvm = find_libllvm()
-        if libllvm is not None:
-            os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    point_drjit_at_libllvm()
     import mitsuba as mi
 
     threads = os.environ.get("HGRENDER_RENDER_THREADS")

@@ -32,12 +32,21 @@ from rq.exceptions import NoSuchJobError
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
-from hgcore.pixel_sums import PixelSums
+from hgcore.artifacts.keys import (
+    artifact_key,
+    chunk_key,
+    input_prefix,
+    job_prefix,
+    manifest_key,
+    scene_key,
+    worker_log_key,
+)
+from hgcore.artifacts.pixel_sums import PixelSums
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
 from schemas.scene import MAX_FILM_MODES, Scene
-from service.jobs import JobService, chunk_key, chunk_rq_id, scene_key
+from service.jobs import JobService, chunk_rq_id
 from service.models import TERMINAL_STATUSES, JobStatus
 
 if TYPE_CHECKING:
@@ -63,12 +72,9 @@ def preload_renderer() -> None:
 
 
 def _load_libraries() -> None:
-    from worker.mitsuba_setup import find_libllvm
+    from worker.mitsuba_setup import point_drjit_at_libllvm
 
-    # As load_mitsuba() does: Dr.Jit must see libLLVM 19 before it is first imported.
-    libllvm = find_libllvm()
-    if "DRJIT_LIBLLVM_PATH" not in os.environ and libllvm is not None:
-        os.environ["DRJIT_LIBLLVM_PATH"] = libllvm
+    point_drjit_at_libllvm()
     import mitsuba
     import OpenImageIO  # noqa: F401  (EXR writing, imported lazily by the merge step)
     import PIL.Image  # (preview PNG, idem)
@@ -76,7 +82,7 @@ def _load_libraries() -> None:
     PIL.Image.init()  # registers the image plugins now, not at the first save in each horse (~20 ms)
 
     import worker.render.api  # noqa: F401
-    from worker.render.output import preview_png
+    from hgcore.artifacts.images import preview_png
 
     preview_png(np.zeros((1, 1, 3)))  # PIL's first PNG encoding (~2 ms); zlib starts no threads
     # Not so OpenImageIO: its first image output starts a thread pool that a forked horse would lack
@@ -155,11 +161,11 @@ class _CancelPoll:
 def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> tuple[dict[str, Any], Path | None]:
     """The job's scene and, for an uploaded bundle, the local folder its files were copied to (the
     renderer resolves the scene's relative file paths against it)."""
-    input_prefix = f"jobs/{job_id}/input/"
+    inputs_prefix = input_prefix(job_id)
     bundle_dir = work_dir / "input"
-    inputs = jobs.store.list(input_prefix)
+    inputs = jobs.store.list(inputs_prefix)
     for info in inputs:
-        jobs.store.get_file(info.key, bundle_dir / info.key[len(input_prefix) :])
+        jobs.store.get_file(info.key, bundle_dir / info.key.removeprefix(inputs_prefix))
     return jobs.scene(job_id), bundle_dir if inputs else None
 
 
@@ -288,13 +294,13 @@ def _worker_log(jobs: JobService, job_id: str) -> bytes:
 def _artifact_digests(jobs: JobService, job_id: str) -> list[dict[str, Any]]:
     """Name, size and SHA-256 of every stored artifact of the job (streamed, never all in memory)."""
     digests = []
-    for info in jobs.store.list(f"jobs/{job_id}/"):
-        if info.key.endswith("/manifest.json"):
+    for info in jobs.store.list(job_prefix(job_id)):
+        if info.key == manifest_key(job_id):
             continue
         sha256 = hashlib.sha256()
         for piece in jobs.store.iter_bytes(info.key):
             sha256.update(piece)
-        name = info.key.removeprefix(f"jobs/{job_id}/")
+        name = info.key.removeprefix(job_prefix(job_id))
         digests.append({"name": name, "size_bytes": info.size_bytes, "sha256": sha256.hexdigest()})
     return digests
 
@@ -314,15 +320,13 @@ def _write_manifest(
     job = view.model_dump(mode="json") | overrides
     job["timings"] |= timing_overrides
     manifest = {"job": job, "artifacts": artifacts, "written_at": time.time()}
-    jobs.store.put_bytes(f"jobs/{job_id}/manifest.json", json.dumps(manifest, indent=1).encode())
+    jobs.store.put_bytes(manifest_key(job_id), json.dumps(manifest, indent=1).encode())
 
 
 def _fail(jobs: JobService, job_id: str, error: str) -> None:
     """Record a failed job: its log and manifest first, then the final status."""
     finished_at = time.time()
-    jobs.store.put_bytes(
-        f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id) + f"error: {error}\n".encode()
-    )
+    jobs.store.put_bytes(worker_log_key(job_id), _worker_log(jobs, job_id) + f"error: {error}\n".encode())
     created_at = float(jobs.record(job_id)["created_at"])
     artifacts = _artifact_digests(jobs, job_id)
     final = {"status": "failed", "error": error, "eta_s": None}
@@ -400,10 +404,10 @@ def _write_final_artifacts(
     )
     for path in sorted(out_dir.rglob("*")):
         if path.is_file():
-            jobs.store.put_file(f"jobs/{job_id}/{path.relative_to(out_dir).as_posix()}", path)
+            jobs.store.put_file(artifact_key(job_id, path.relative_to(out_dir).as_posix()), path)
     merge_s = time.monotonic() - started_s
     jobs.chunk_finished(job_id, "merge", samples=0, seconds=merge_s)
-    jobs.store.put_bytes(f"jobs/{job_id}/worker.log", _worker_log(jobs, job_id))
+    jobs.store.put_bytes(worker_log_key(job_id), _worker_log(jobs, job_id))
     jobs.store.put_bytes(scene_key(job_id), json.dumps(scene_document, indent=1).encode())  # provenance
     finished_at = time.time()
     # The manifest is complete before the status says succeeded, so a client never misses or races it.

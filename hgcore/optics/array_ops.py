@@ -1,8 +1,9 @@
 """Array namespaces that let one formula run on NumPy arrays and inside Dr.Jit kernels.
 
 Every optics formula in ``hgcore.optics`` is written once against an ``ArrayOps`` namespace ``ops``:
-``NUMPY`` for the reference implementation and tests, ``DRJIT`` inside Mitsuba's ``llvm_ad_*`` /
-``cuda_ad_*`` symbolic loops. Only element-wise operations are used, so the same code vectorises in both.
+``NUMPY`` for the reference implementation and tests, ``worker.render.drjit_ops`` inside Mitsuba's
+``llvm_ad_*`` / ``cuda_ad_*`` symbolic loops. Only element-wise operations are used, so the same code
+vectorises in both.
 """
 
 from __future__ import annotations
@@ -49,26 +50,6 @@ NUMPY = ArrayOps(
     where=np.where,
     floor=np.floor,
 )
-
-
-def drjit_ops() -> ArrayOps:
-    """The Dr.Jit namespace (imported lazily: the service uses the NumPy path and never loads Dr.Jit)."""
-    import drjit as dr
-
-    return ArrayOps(
-        name="drjit",
-        exp=dr.exp,
-        log=dr.log,
-        sqrt=dr.sqrt,
-        sin=dr.sin,
-        cos=dr.cos,
-        atan2=dr.atan2,
-        abs=dr.abs,
-        minimum=dr.minimum,
-        maximum=dr.maximum,
-        where=dr.select,
-        floor=dr.floor,
-    )
 
 
 def hermite_functions(u: Any, max_order: int, ops: ArrayOps = NUMPY) -> list[Any]:

@@ -1,13 +1,12 @@
-"""Emission spectra, CIE 1931 colour matching and the XYZ → linear-sRGB matrix (NumPy).
+"""Emission spectra and CIE 1931 colour matching (NumPy; XYZ ↔ sRGB lives in ``hgcore.colour``).
 
 * Planck's law, spectral radiance per unit wavelength in W·m⁻²·sr⁻¹·nm⁻¹:
   B_λ(T) = 2hc²/λ⁵ · 1/(exp(hc/(λ k_B T)) − 1), with λ in m and the result scaled by 10⁻⁹ m/nm (CODATA 2018
   exact h, c, k_B).
 * CIE standard illuminants D65 and FL1–FL12 (relative spectral power, D65 = 100 at 560 nm) and the CIE 1931
-  2° colour-matching functions x̄, ȳ, z̄ (1 nm, 360–830 nm), from the CSV files in ``worker/optics/data``
+  2° colour-matching functions x̄, ȳ, z̄ (1 nm, 360–830 nm), from the CSV files in ``hgcore/optics/data``
   (CIE 15:2004; ISO 11664-1/-2 = CIE S 014-1/-2; generated once with colour-science, see the file headers).
   Tables are linearly interpolated and are 0 outside their tabulated range.
-* Linear sRGB from CIE XYZ (D65 white), IEC 61966-2-1:1999 §5.2 matrix.
 """
 
 from __future__ import annotations
@@ -24,18 +23,11 @@ PLANCK_J_S = 6.62607015e-34
 SPEED_OF_LIGHT_M_PER_S = 299792458.0
 BOLTZMANN_J_PER_K = 1.380649e-23
 
-XYZ_TO_LINEAR_SRGB = np.array(
-    [
-        [3.2406, -1.5372, -0.4986],
-        [-0.9689, 1.8758, 0.0415],
-        [0.0557, -0.2040, 1.0570],
-    ]
-)
 ILLUMINANTS: tuple[str, ...] = ("d65", *(f"f{index}" for index in range(1, 13)))
 
 
 def load_data_csv(filename: str) -> tuple[tuple[str, ...], np.ndarray]:
-    """Column names and values of a ``worker/optics/data`` CSV ('#' comment lines, then a header row)."""
+    """Column names and values of a ``hgcore/optics/data`` CSV ('#' comment lines, then a header row)."""
     lines = (DATA_DIR / filename).read_text(encoding="utf-8").splitlines()
     body = [line for line in lines if line.strip() and not line.startswith("#")]
     names = tuple(body[0].split(","))
@@ -125,11 +117,3 @@ def spectrum_to_xyz(wavelength_nm: np.ndarray, values: np.ndarray) -> np.ndarray
         raise ValueError("wavelength_nm: must be a 1-D, strictly increasing grid of at least 2 wavelengths")
     weights = cie_cmf(wavelengths) * np.asarray(values, dtype=float)[..., None]
     return np.trapezoid(weights, wavelengths, axis=-2)
-
-
-def xyz_to_linear_srgb(xyz: np.ndarray) -> np.ndarray:
-    """Linear sRGB (no transfer curve) from CIE XYZ, last axis of size 3 (IEC 61966-2-1)."""
-    values = np.asarray(xyz, dtype=float)
-    if values.shape[-1] != 3:
-        raise ValueError(f"xyz: last axis must have size 3, got shape {values.shape}")
-    return values @ XYZ_TO_LINEAR_SRGB.T

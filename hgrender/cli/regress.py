@@ -30,6 +30,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
+from hgcore.artifacts.layout import IMAGE_EXR
 from hgrender.cli import CliError
 
 
@@ -82,8 +83,10 @@ def load_suite(path: Path) -> Any:
 
 
 def _copy_outputs(source: Path, destination: Path) -> None:
+    from service.regression.store import BASELINE_FILES
+
     destination.mkdir(parents=True, exist_ok=True)
-    for name in ("image.exr", "variance.exr", "summary.json"):
+    for name in BASELINE_FILES:
         temporary = destination / f".{name}.tmp"
         shutil.copyfile(source / name, temporary)
         os.replace(temporary, destination / name)
@@ -105,7 +108,7 @@ def run_suite(
         try:
             render_scene(resolve_scene(entry, seed), current_dir)
             baseline = baseline_dir / entry.key
-            if (baseline / "image.exr").is_file():
+            if (baseline / IMAGE_EXR).is_file():
                 comparison = compare_renders(
                     entry.key,
                     load_render_outputs(baseline),

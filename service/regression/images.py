@@ -9,14 +9,14 @@ with OpenImageIO; NumPy only (the service imports this module, so no Mitsuba).
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 
-_BAND_CHANNEL = re.compile(r"^S0\.(\d+),(\d+)nm$")
+from hgcore.artifacts.exr import ArtifactFormatError, read_exr
+from hgcore.artifacts.layout import COHERENCE_WEIGHT, IMAGE_EXR, SUMMARY_JSON, VARIANCE_EXR, coherence_channel
+
 COHERENCE_METRIC_CHANNELS: tuple[str, ...] = ("l1_um", "l2_um", "anisotropy")
 """Coherence diagnostics compared by the drift metric (``coherence.<name>``)."""
 
@@ -37,55 +37,30 @@ class RenderOutputs:
     spp: int
 
 
-def read_exr_channels(path: Path) -> dict[str, np.ndarray]:
-    """Every channel of an EXR file as float64 (H, W) arrays keyed by channel name."""
-    image = oiio.ImageInput.open(str(path))
-    if image is None:
-        raise ValueError(f"path: cannot open {path} as an image: {oiio.geterror()}")
-    try:
-        spec = image.spec()
-        pixels = image.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
-    finally:
-        image.close()
-    if pixels is None:
-        raise ValueError(f"path: cannot read the pixels of {path}")
-    pixels = np.asarray(pixels, dtype=np.float64).reshape(spec.height, spec.width, spec.nchannels)
-    return {name: pixels[..., index] for index, name in enumerate(spec.channelnames)}
-
-
-def band_channels(channels: dict[str, np.ndarray]) -> list[tuple[float, str]]:
-    """(centre in nm, channel name) of the spectral ``S0.<λ>nm`` channels, by wavelength."""
-    found = []
-    for name in channels:
-        match = _BAND_CHANNEL.match(name)
-        if match:
-            found.append((float(f"{match.group(1)}.{match.group(2)}"), name))
-    return sorted(found)
-
-
 def load_render_outputs(directory: Path) -> RenderOutputs:
     """``image.exr``, ``variance.exr`` and ``summary.json`` (for the spp) of one job from ``directory``."""
     directory = Path(directory)
-    spp = int(json.loads((directory / "summary.json").read_text())["spp"])
+    spp = int(json.loads((directory / SUMMARY_JSON).read_text())["spp"])
     if spp < 2:
-        raise ValueError(f"directory: {directory} was rendered with {spp} spp; noise estimates need >= 2")
-    image = read_exr_channels(directory / "image.exr")
-    variance = read_exr_channels(directory / "variance.exr")
-    bands = band_channels(image)
+        raise ArtifactFormatError(f"{SUMMARY_JSON}: rendered with {spp} spp; noise estimates need >= 2")
+    image = read_exr(directory / IMAGE_EXR)
+    variance = read_exr(directory / VARIANCE_EXR)
+    bands = image.spectral_channels()
     if len(bands) < 2:
-        raise ValueError(f"directory: {directory / 'image.exr'} has fewer than 2 spectral S0.<λ>nm channels")
-    missing = [name for _, name in bands if name not in variance]
-    if missing:
-        raise ValueError(f"directory: {directory / 'variance.exr'} lacks the band channels {missing}")
+        raise ArtifactFormatError(f"{IMAGE_EXR}: has fewer than 2 spectral S0.<λ>nm channels")
+    variance.require([name for _, name in bands], VARIANCE_EXR)
     coherence = {
-        name: image[f"coherence.{name}"]
-        for name in (*COHERENCE_METRIC_CHANNELS, "weight")
-        if f"coherence.{name}" in image
+        name: image.channels[coherence_channel(name)].astype(np.float64)
+        for name in COHERENCE_METRIC_CHANNELS
+        if coherence_channel(name) in image.channels
     }
+    if COHERENCE_WEIGHT in image.channels:
+        coherence["weight"] = image.channels[COHERENCE_WEIGHT].astype(np.float64)
     return RenderOutputs(
         band_centers_nm=np.array([center for center, _ in bands]),
-        bands=np.stack([image[name] for _, name in bands], axis=-1),
-        band_variance=np.stack([variance[name] for _, name in bands], axis=-1) * (spp / (spp - 1)),
+        bands=np.stack([image.channels[name] for _, name in bands], axis=-1).astype(np.float64),
+        band_variance=np.stack([variance.channels[name] for _, name in bands], axis=-1).astype(np.float64)
+        * (spp / (spp - 1)),
         coherence=coherence,
         spp=spp,
     )

@@ -23,6 +23,7 @@ import redis
 from rq import Queue, get_current_job
 from rq.job import Dependency
 
+from hgcore.artifacts.keys import artifact_key
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
@@ -159,7 +160,7 @@ class RunService:
             (baseline_dir / name).write_bytes(
                 self.regression.baseline_file(result.scene, baseline.version, name)
             )
-            self.jobs.store.get_file(f"jobs/{result.job_id}/{name}", current_dir / name)
+            self.jobs.store.get_file(artifact_key(result.job_id, name), current_dir / name)
         entry = next(s for s in run.suite.scenes if s.key == result.scene)
         comparison = compare_renders(
             result.scene,

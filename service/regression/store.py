@@ -21,6 +21,8 @@ import uuid
 
 import redis
 
+from hgcore.artifacts.keys import job_prefix
+from hgcore.artifacts.layout import IMAGE_EXR, SUMMARY_JSON, VARIANCE_EXR
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 from service.regression.models import BaselineList, BaselineView, RunView, ScheduleCreate, ScheduleView
 
@@ -34,7 +36,7 @@ _RUNS_KEY = _PREFIX + "runs"
 _SCHEDULE_RUNS_KEY = _PREFIX + "runs:schedule:{}"
 _BASELINE_KEY = _PREFIX + "baseline:{}"
 
-BASELINE_FILES: tuple[str, ...] = ("image.exr", "variance.exr", "summary.json")
+BASELINE_FILES: tuple[str, ...] = (IMAGE_EXR, VARIANCE_EXR, SUMMARY_JSON)
 FIRED_CLAIM_TTL_S = 90 * 24 * 3600
 """How long a due-time claim is kept (longer than any misfire grace, so a claim outlives every retry)."""
 
@@ -136,7 +138,7 @@ class RegressionStore:
 
     def promote(self, scene: str, job_id: str, run_id: str | None = None) -> BaselineView:
         """Copy a finished job's images to the next baseline version of ``scene`` and make it current."""
-        source = f"jobs/{job_id}/"
+        source = job_prefix(job_id)
         available = {info.key.removeprefix(source) for info in self.store.list(source)}
         missing = [name for name in BASELINE_FILES if name not in available]
         if missing:

@@ -191,7 +191,7 @@ def test_drjit_degree_of_coherence_and_diagnostics_equal_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from hgcore.optics.array_ops import drjit_ops
+    from worker.render.drjit_ops import drjit_ops
 
     rng = np.random.default_rng(2)
     sigma = rotated((3e-6, 7e-7), 0.9)

@@ -72,7 +72,7 @@ def test_drjit_frame_equals_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from hgcore.optics.array_ops import drjit_ops
+    from worker.render.drjit_ops import drjit_ops
 
     rng = np.random.default_rng(9)
     directions = rng.normal(size=(16, 3))

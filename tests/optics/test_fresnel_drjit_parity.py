@@ -39,7 +39,7 @@ def drjit_env() -> tuple[Any, Any, Any]:
     import drjit as dr
     from drjit.llvm import Float
 
-    from hgcore.optics.array_ops import drjit_ops
+    from worker.render.drjit_ops import drjit_ops
 
     return dr, Float, drjit_ops()
 

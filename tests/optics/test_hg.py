@@ -135,7 +135,7 @@ def test_drjit_evaluation_equals_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from hgcore.optics.array_ops import drjit_ops
+    from worker.render.drjit_ops import drjit_ops
 
     rng = np.random.default_rng(7)
     x_np = rng.uniform(-2.5, 2.5, 64)

@@ -240,7 +240,7 @@ def test_drjit_covariance_components_equal_numpy() -> None:
     mi = load_mitsuba()
     import drjit as dr
 
-    from hgcore.optics.array_ops import drjit_ops
+    from worker.render.drjit_ops import drjit_ops
 
     rng = np.random.default_rng(5)
     axes = rng.normal(size=(32, 3))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize
 
+from hgcore.colour import xyz_to_linear_srgb
 from hgcore.optics.spectra import (
     ILLUMINANTS,
     cie_cmf,
@@ -15,7 +16,6 @@ from hgcore.optics.spectra import (
     planck_radiance,
     spectrum_to_xyz,
     spectrum_values,
-    xyz_to_linear_srgb,
 )
 
 WIEN_B_M_K = 2.897771955e-3  # CODATA 2018

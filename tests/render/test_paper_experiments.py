@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 from scipy.special import erf
 
+from hgcore.artifacts.layout import LAMBDA_REFERENCE_NM
+from hgcore.colour import ciede2000, linear_srgb_to_lab
 from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.sources import source_coefficients, sphere_covariance_components
 from tests.render import scenes
-from tests.render.colour import ciede2000, linear_srgb_to_lab
 from tests.render.exr import read_channels, spectral_stack
 from tests.render.fringes import FringeFit, fit_fringe_visibility, two_beam_band_terms
 from worker.render.api import render_scene
-from worker.render.spectral import LAMBDA_REFERENCE_NM
 
 K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)
 

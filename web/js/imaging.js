@@ -1,4 +1,4 @@
-// Display transforms of the viewer: the same formulas as hgrender/imaging.py (tests compare canvas pixels
+// Display transforms of the viewer: the same formulas as hgcore/imaging.py (tests compare canvas pixels
 // with the server's display_rgb8 of the same data).
 //
 //   exposure:     linear × 2^EV

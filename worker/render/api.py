@@ -8,25 +8,22 @@ merged image therefore has exactly S samples per pixel and the same expectation 
 
 from __future__ import annotations
 
-import io
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from hgcore.pixel_sums import PixelSums
-from schemas.scene import Scene
-from schemas.validation import validate_scene
-from worker.render.output import (
-    atomic_write_bytes,
+from hgcore.artifacts.images import (
     coherence_statistics,
     images_from_sums,
     write_images,
     write_summary,
 )
+from hgcore.artifacts.layout import SUMMARY_JSON, BandLayout
+from hgcore.artifacts.pixel_sums import PixelSums, read_partial, write_partial
+from schemas.scene import Scene
+from schemas.validation import validate_scene
 from worker.render.renderer import Renderer
 from worker.render.scene_compiler import SceneCompiler
 
@@ -114,15 +111,7 @@ def render_chunk_sums(
 
 def save_chunk(rendered: RenderedChunk, out_path: Path) -> None:
     """Write a chunk's sums to ``out_path`` (.npz, atomic), the partial that ``merge_chunks`` adds up."""
-    buffer = io.BytesIO()
-    np.savez(  # uncompressed: zlib on float data costs more than it saves
-        buffer,
-        **rendered.sums.to_arrays(),
-        seconds=np.array(rendered.seconds),
-        chunk_index=np.array(rendered.chunk.index),
-        seed=np.array(rendered.chunk.seed),
-    )
-    atomic_write_bytes(Path(out_path), buffer.getvalue())
+    write_partial(out_path, rendered.sums, rendered.seconds, rendered.chunk.index, rendered.chunk.seed)
 
 
 def render_chunk(
@@ -142,15 +131,9 @@ def render_chunk(
     return rendered.result()
 
 
-def load_chunk(path: Path) -> tuple[PixelSums, float]:
-    with np.load(path) as data:
-        arrays = {key: data[key] for key in data.files}
-    return PixelSums.from_arrays(arrays), float(arrays["seconds"])
-
-
 def load_chunks(paths: Sequence[Path]) -> tuple[list[PixelSums], float]:
     """The chunks' sums, in the order given, and their render time summed (seconds)."""
-    loaded = [load_chunk(Path(path)) for path in paths]
+    loaded = [read_partial(Path(path)) for path in paths]
     return [sums for sums, _ in loaded], sum(seconds for _, seconds in loaded)
 
 
@@ -184,8 +167,6 @@ def write_merged(
     total = chunk_sums[0]
     for sums in chunk_sums[1:]:
         total = total.add(sums)
-    from worker.render.spectral import BandLayout
-
     film = parsed.film
     bands = BandLayout(film.wavelength_min_nm, film.wavelength_max_nm, film.bands)
     images = images_from_sums(total, bands)
@@ -209,7 +190,7 @@ def write_merged(
         "samples": samples,
         "samples_per_second": samples / render_seconds if render_seconds > 0 else None,
         "coherence": coherence_statistics(images),
-        "files": [*files, "summary.json"],
+        "files": [*files, SUMMARY_JSON],
         **(extra_summary or {}),
     }
     write_summary(out_dir, summary)

@@ -26,11 +26,11 @@ import drjit as dr
 
 from hgcore.optics import grating as grating_model
 from hgcore.optics import rough_surface
-from hgcore.optics.array_ops import drjit_ops
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_dielectric, fresnel_reflectance
 from hgcore.optics.thin_film import combine_reflectance_terms, film_amplitudes, reflectance_terms
 from worker.render import materials as mat
+from worker.render.drjit_ops import drjit_ops
 from worker.render.spectral import lookup
 
 OPS = drjit_ops()

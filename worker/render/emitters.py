@@ -110,7 +110,7 @@ def emitter_coherence(
     """
     import drjit as dr
 
-    from hgcore.optics.array_ops import drjit_ops
+    from worker.render.drjit_ops import drjit_ops
 
     ops = drjit_ops()
     base = emitter_index * STRIDE

@@ -32,15 +32,15 @@ from typing import Any
 
 import drjit as dr
 
+from hgcore.artifacts.layout import K_REFERENCE_PER_M, BandLayout
 from hgcore.optics import sources
-from hgcore.optics.array_ops import drjit_ops
 from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.frames import transverse_frame_components
 from worker.mitsuba_setup import load_mitsuba
 from worker.render import materials as mat
 from worker.render.bsdfs import IncidentCoherence, MaterialKernels, combine_film_terms
+from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect
-from worker.render.spectral import K_REFERENCE_PER_M, BandLayout
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
 # (``load_mitsuba`` honours HGRENDER_VARIANT; ``auto`` picks cuda_ad_spectral when a GPU is usable).

@@ -17,8 +17,8 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
+from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums
 from hgcore.optics.sources import source_coefficients
-from hgcore.pixel_sums import SUM_KEYS, PixelSums
 from worker.mitsuba_setup import load_mitsuba
 from worker.render.emitters import EmitterKind
 from worker.render.integrator import HGPathIntegrator, RenderContext, register

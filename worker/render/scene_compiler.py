@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.artifacts.layout import BandLayout
 from hgcore.optics import ior as ior_data
 from hgcore.optics.grating import BinaryGrating
 from hgcore.optics.rough_surface import RoughSurface
@@ -25,7 +26,7 @@ from schemas import scene as model
 from schemas.photometry import evaluate_spectrum
 from worker.render import materials as mat
 from worker.render.emitters import EmitterKind, EmitterRecord, EmitterTable
-from worker.render.spectral import BandLayout, SpectralTable, grid_wavelengths_nm
+from worker.render.spectral import SpectralTable, grid_wavelengths_nm
 
 EMITTER_SPECTRUM_STEP_NM = 1.0
 

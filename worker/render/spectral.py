@@ -12,47 +12,17 @@ Material spectra (reflectances, refractive indices) live in one flat table sampl
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
 
 GRID_MIN_NM = 200.0
 GRID_MAX_NM = 2500.0
 GRID_STEP_NM = 5.0
 GRID_SIZE = round((GRID_MAX_NM - GRID_MIN_NM) / GRID_STEP_NM) + 1
-LAMBDA_REFERENCE_NM = 550.0  # diagnostics are reported at this wavelength (BRIEF)
-K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)  # its wavenumber k (1/m)
 
 
 def grid_wavelengths_nm() -> np.ndarray:
     """The wavelengths (nm) of the spectral lookup grid."""
     return GRID_MIN_NM + GRID_STEP_NM * np.arange(GRID_SIZE)
-
-
-@dataclass(frozen=True)
-class BandLayout:
-    """``band_count`` equal bands over [wavelength_min_nm, wavelength_max_nm]."""
-
-    wavelength_min_nm: float
-    wavelength_max_nm: float
-    band_count: int
-
-    @property
-    def width_nm(self) -> float:
-        return (self.wavelength_max_nm - self.wavelength_min_nm) / self.band_count
-
-    @property
-    def centers_nm(self) -> np.ndarray:
-        return self.wavelength_min_nm + self.width_nm * (np.arange(self.band_count) + 0.5)
-
-    @property
-    def edges_nm(self) -> np.ndarray:
-        return self.wavelength_min_nm + self.width_nm * np.arange(self.band_count + 1)
-
-    def channel_names(self) -> list[str]:
-        """Spectral EXR channel names (Fichet et al. 2021): ``S0.<λ>nm`` with a comma decimal separator."""
-        return ["S0." + f"{center:.6f}".replace(".", ",") + "nm" for center in self.centers_nm]
 
 
 class SpectralTable:

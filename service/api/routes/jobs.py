@@ -11,11 +11,12 @@ from sse_starlette import EventSourceResponse
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 
+from hgcore.artifacts.keys import job_prefix
 from hgcore.store.base import validate_key
 from schemas import SceneLimits
 from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
 from service.events import job_events
-from service.jobs import JobNotFoundError, artifact_prefix
+from service.jobs import JobNotFoundError
 from service.models import (
     ArtifactList,
     ArtifactView,
@@ -188,7 +189,7 @@ def list_artifacts(job_id: JobId, jobs: JobsDep, store: StoreDep, principal: Rea
     """Final artifacts (image.exr, preview.png, summary.json, worker.log, manifest.json, ...) and the
     job's inputs and chunk partials, with sizes and download URLs."""
     visible_job(jobs, principal, job_id)
-    prefix = artifact_prefix(job_id)
+    prefix = job_prefix(job_id)
     items = [
         ArtifactView(
             name=(name := info.key.removeprefix(prefix)),
@@ -213,7 +214,7 @@ def download_artifact(
 ) -> Response:
     visible_job(jobs, principal, job_id)
     try:
-        key = validate_key(artifact_prefix(job_id) + name)
+        key = validate_key(job_prefix(job_id) + name)
     except ValueError:
         raise JobNotFoundError(f"{job_id}/{name}") from None
     media_type = _MEDIA_TYPES.get("." + name.rsplit(".", 1)[-1].lower(), "application/octet-stream")

@@ -3,13 +3,20 @@
 A render's result before normalisation: for every pixel the sums over its samples of each band's
 estimate, of its square (for the variance of the mean), and of the diagnostics and AOV terms
 (``SUM_KEYS``). Chunks merge by adding sums; dividing by ``sample_count`` gives the images.
+
+A chunk partial (``.npz``, uncompressed: zlib on float data costs more than it saves) holds the sums as
+float32 (``PixelSums.to_arrays``) plus the chunk's render time ``seconds``, ``chunk_index`` and ``seed``.
 """
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+
+from hgcore.files import atomic_write_bytes
 
 SUM_KEYS = (
     "diag_w",
@@ -66,3 +73,23 @@ class PixelSums:
             arrays["bands_sq"].astype(np.float64),
             {key: arrays[f"v_{key}"].astype(np.float64) for key in SUM_KEYS},
         )
+
+
+def write_partial(path: Path, sums: PixelSums, seconds: float, chunk_index: int, seed: int) -> None:
+    """Write a chunk's sums and render time (seconds) to ``path`` (.npz, atomic)."""
+    buffer = io.BytesIO()
+    np.savez(
+        buffer,
+        **sums.to_arrays(),
+        seconds=np.array(seconds),
+        chunk_index=np.array(chunk_index),
+        seed=np.array(seed),
+    )
+    atomic_write_bytes(Path(path), buffer.getvalue())
+
+
+def read_partial(path: Path) -> tuple[PixelSums, float]:
+    """A chunk partial's sums and its render time (seconds)."""
+    with np.load(path) as data:
+        arrays = {key: data[key] for key in data.files}
+    return PixelSums.from_arrays(arrays), float(arrays["seconds"])

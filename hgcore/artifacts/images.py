@@ -6,39 +6,39 @@
 the bands, normalised so that a unit equal-energy spectrum has Y = 1); the BRIEF's ``coherence.*``
 diagnostics; ``depth`` (m), ``normal.X/Y/Z`` (world) and ``albedo.R/G/B`` of the first hit.
 ``variance.exr`` holds the variance of each band's pixel mean (σ²/N, from the per-sample second moments)
-for noise-aware regression tests. Writes are atomic.
+for noise-aware regression tests. Writes are atomic. Names and channels: ``hgcore.artifacts.layout``.
 """
 
 from __future__ import annotations
 
+import io
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hgcore.colour import band_edges_xyz_weights, y_bar_integral_nm
+from hgcore.artifacts.exr import write_exr
+from hgcore.artifacts.layout import (
+    COHERENCE_DIAGNOSTICS,
+    COHERENCE_WEIGHT,
+    IMAGE_EXR,
+    K_REFERENCE_PER_M,
+    LAMBDA_REFERENCE_NM,
+    LUMINANCE_VARIANCE,
+    PREVIEW_PNG,
+    RGB_CHANNELS,
+    SPECTRAL_ATTRIBUTES,
+    SUMMARY_JSON,
+    VARIANCE_EXR,
+    BandLayout,
+    coherence_channel,
+)
+from hgcore.artifacts.pixel_sums import PixelSums
+from hgcore.colour import band_edges_xyz_weights, xyz_to_linear_srgb, y_bar_integral_nm
+from hgcore.files import atomic_write_bytes
 from hgcore.imaging import auto_exposure_ev, display_rgb8
-from hgcore.optics import spectra
 from hgcore.optics.coherence import diagnostics_components
-from hgcore.pixel_sums import PixelSums
-from worker.render.spectral import K_REFERENCE_PER_M, LAMBDA_REFERENCE_NM, BandLayout
-
-COHERENCE_CHANNELS = ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy")
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray]:
@@ -48,7 +48,7 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
     band_variance = np.maximum(sums.bands_sq / count - band_mean**2, 0.0) / count
     # Normalised so that a unit equal-energy spectrum has Y = 1 (Mitsuba's film convention).
     xyz = band_mean @ band_edges_xyz_weights(bands.edges_nm) / y_bar_integral_nm()
-    rgb = spectra.xyz_to_linear_srgb(xyz)
+    rgb = xyz_to_linear_srgb(xyz)
     values = sums.values
     weight = values["diag_w"]
     covered = weight > 0
@@ -83,50 +83,21 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
         "rgb": rgb.astype(np.float32),
         "depth": (values["depth"] / count).astype(np.float32),
         "normal": (np.stack([values[f"normal_{c}"] for c in "xyz"], axis=-1) / count).astype(np.float32),
-        "albedo": spectra.xyz_to_linear_srgb(albedo_xyz).astype(np.float32),
+        "albedo": xyz_to_linear_srgb(albedo_xyz).astype(np.float32),
         "luminance_variance": (
             np.maximum(values["luminance_sq"] / count - (values["luminance"] / count) ** 2, 0.0) / count
         ).astype(np.float32),
-        **{f"coherence.{key}": value.astype(np.float32) for key, value in coherence.items()},
-        "coherence.weight": (weight / count).astype(np.float32),
+        **{coherence_channel(key): value.astype(np.float32) for key, value in coherence.items()},
+        COHERENCE_WEIGHT: (weight / count).astype(np.float32),
     }
-
-
-def _write_exr(path: Path, channels: list[tuple[str, np.ndarray]], attributes: dict[str, str]) -> None:
-    import OpenImageIO as oiio
-
-    height, width = channels[0][1].shape
-    pixels = np.stack([data for _, data in channels], axis=-1).astype(np.float32)
-    spec = oiio.ImageSpec(width, height, len(channels), "float")
-    spec.channelnames = tuple(name for name, _ in channels)
-    spec.attribute("compression", "zip")
-    for key, value in attributes.items():
-        spec.attribute(key, value)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".exr")
-    os.close(handle)
-    try:
-        output = oiio.ImageOutput.create(temporary)
-        if output is None or not output.open(temporary, spec):
-            raise OSError(f"cannot write {path}: {oiio.geterror()}")
-        ok = output.write_image(pixels)
-        output.close()
-        if not ok:
-            raise OSError(f"cannot write {path}: {oiio.geterror()}")
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-
-
-SPECTRAL_ATTRIBUTES = {"spectralLayoutVersion": "1.0", "emissiveUnits": "W.m^-2.sr^-1"}
 
 
 def image_channels(images: dict[str, np.ndarray], bands: BandLayout) -> list[tuple[str, np.ndarray]]:
     """The (name, (H, W) array) channels of ``image.exr`` in file order."""
-    channels = [("R", images["rgb"][..., 0]), ("G", images["rgb"][..., 1]), ("B", images["rgb"][..., 2])]
+    channels = [(name, images["rgb"][..., i]) for i, name in enumerate(RGB_CHANNELS)]
     channels += [(name, images["bands"][..., b]) for b, name in enumerate(bands.channel_names())]
-    channels += [(f"coherence.{key}", images[f"coherence.{key}"]) for key in (*COHERENCE_CHANNELS, "weight")]
+    channels += [(coherence_channel(key), images[coherence_channel(key)]) for key in COHERENCE_DIAGNOSTICS]
+    channels += [(COHERENCE_WEIGHT, images[COHERENCE_WEIGHT])]
     channels += [("depth", images["depth"])]
     channels += [(f"normal.{axis}", images["normal"][..., i]) for i, axis in enumerate("XYZ")]
     channels += [(f"albedo.{c}", images["albedo"][..., i]) for i, c in enumerate("RGB")]
@@ -135,17 +106,15 @@ def image_channels(images: dict[str, np.ndarray], bands: BandLayout) -> list[tup
 
 def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path) -> list[str]:
     """image.exr, variance.exr and preview.png into ``out_dir``; returns the file names."""
-    _write_exr(out_dir / "image.exr", image_channels(images, bands), SPECTRAL_ATTRIBUTES)
+    write_exr(out_dir / IMAGE_EXR, image_channels(images, bands), SPECTRAL_ATTRIBUTES)
     variance = [(name, images["band_variance"][..., b]) for b, name in enumerate(bands.channel_names())]
-    variance.append(("Y", images["luminance_variance"]))
-    _write_exr(out_dir / "variance.exr", variance, SPECTRAL_ATTRIBUTES)
-    atomic_write_bytes(out_dir / "preview.png", preview_png(images["rgb"]))
-    return ["image.exr", "variance.exr", "preview.png"]
+    variance.append((LUMINANCE_VARIANCE, images["luminance_variance"]))
+    write_exr(out_dir / VARIANCE_EXR, variance, SPECTRAL_ATTRIBUTES)
+    atomic_write_bytes(out_dir / PREVIEW_PNG, preview_png(images["rgb"]))
+    return [IMAGE_EXR, VARIANCE_EXR, PREVIEW_PNG]
 
 
 def preview_png(rgb: np.ndarray) -> bytes:
-    import io
-
     from PIL import Image
 
     buffer = io.BytesIO()
@@ -155,10 +124,10 @@ def preview_png(rgb: np.ndarray) -> bytes:
 
 def coherence_statistics(images: dict[str, np.ndarray]) -> dict[str, Any]:
     """Mean and percentiles of ℓ₁, ℓ₂, anisotropy and area over pixels with diagnostics."""
-    covered = images["coherence.weight"] > 0
+    covered = images[COHERENCE_WEIGHT] > 0
     stats: dict[str, Any] = {"covered_pixels": int(covered.sum())}
     for key in ("l1_um", "l2_um", "anisotropy", "area_um2", "r_m"):
-        values = images[f"coherence.{key}"][covered]
+        values = images[coherence_channel(key)][covered]
         if values.size == 0:
             stats[key] = None
             continue
@@ -172,4 +141,4 @@ def coherence_statistics(images: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def write_summary(out_dir: Path, summary: dict[str, Any]) -> None:
-    atomic_write_bytes(out_dir / "summary.json", json.dumps(summary, indent=2, sort_keys=True).encode())
+    atomic_write_bytes(out_dir / SUMMARY_JSON, json.dumps(summary, indent=2, sort_keys=True).encode())

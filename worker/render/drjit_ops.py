@@ -1,0 +1,28 @@
+"""The Dr.Jit ``ArrayOps`` namespace: runs the shared optics formulas of ``hgcore.optics`` inside Mitsuba's
+``llvm_ad_*`` / ``cuda_ad_*`` symbolic loops. It lives with the worker because only the worker may import
+Dr.Jit (``make lint``'s layer contracts); the service runs the same formulas on NumPy.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+
+from hgcore.optics.array_ops import ArrayOps
+
+
+def drjit_ops() -> ArrayOps:
+    """The Dr.Jit namespace, for the optics formulas inside the integrator's kernels."""
+    return ArrayOps(
+        name="drjit",
+        exp=dr.exp,
+        log=dr.log,
+        sqrt=dr.sqrt,
+        sin=dr.sin,
+        cos=dr.cos,
+        atan2=dr.atan2,
+        abs=dr.abs,
+        minimum=dr.minimum,
+        maximum=dr.maximum,
+        where=dr.select,
+        floor=dr.floor,
+    )
