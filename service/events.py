@@ -1,7 +1,7 @@
 """Server-Sent Events of one job: a ``status`` event with the full job view first, then ``progress``
 events as chunks advance and a ``status`` event at every status change, until a final status.
 
-Workers publish to the Redis channel ``hgrender:events:<id>`` (``JobService.publish``). The stream
+Workers publish to the Redis channel ``hgrender:events:<id>`` (``JobRecords.publish``). The stream
 subscribes *before* reading the first snapshot, so no change between the two is missed, and re-reads
 the job every ``resync_s`` so that a lost message (e.g. Redis restarted) cannot stall a client.
 """
@@ -15,8 +15,10 @@ from collections.abc import AsyncIterator
 import redis.asyncio as aioredis
 from starlette.requests import Request
 
-from service.jobs import EVENTS_CHANNEL, JobService
-from service.models import TERMINAL_STATUSES, JobView
+from hgcore.jobs.keys import events_channel
+from hgcore.jobs.status import TERMINAL_STATUSES
+from hgcore.jobs.views import JobView
+from service.jobs import JobService
 
 
 async def job_events(
@@ -24,7 +26,7 @@ async def job_events(
 ) -> AsyncIterator[dict[str, str]]:
     """Yield sse-starlette event dicts (``event``, ``data``) for ``job_id``."""
     pubsub = client.pubsub()
-    await pubsub.subscribe(EVENTS_CHANNEL.format(job_id))
+    await pubsub.subscribe(events_channel(job_id))
     try:
         view = await jobs.aget(job_id)
         if view is None:

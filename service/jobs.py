@@ -1,24 +1,7 @@
-"""Render jobs: records in Redis, the status state machine, chunk planning, enqueueing, cancel and delete,
-and progress aggregated over chunks.
-
-A job of ``K > 1`` chunks becomes ``K`` RQ chunk jobs (``<id>-chunk-<i>``; the worker renders spp
-partition ``i`` of ``worker.render.api.plan_chunks(spp, K, seed)``, each with its own seed) on the queue its
-priority names, plus one merge job (``<id>-merge``) that depends on all chunks (failures allowed, so the
-merge step is also where a failed chunk fails the job). A job of one chunk becomes a single RQ job under the
-merge job's id that renders and merges in one work horse: no partial upload, and one dequeue and fork
-instead of two (half the queue's latency for small jobs). Either way ``<id>-merge`` is the job's final step,
-the one regression evaluations depend on. Redis layout, all under ``hgrender:``:
-
-``job:<id>``            hash: the record (owner, status, priority, spp, seed, chunks, timestamps, error)
-``job:<id>:scene``      string: the validated scene document (JSON)
-``job:<id>:chunks``     hash: ``<i>.<field>`` per chunk (status, progress, worker, attempts, samples, ...)
-                        and ``merge.<field>``, written by the workers
-``jobs`` / ``jobs:owner:<o>``  sorted sets of ids by creation time (listing, pagination)
-``jobs:by_state``       hash: number of jobs in each status (metrics), kept by the transition script
-``events:<id>``         pub/sub channel of progress and status events (SSE)
-
-Status machine: ``queued → running → succeeded | failed``; ``queued | running → canceled``; final states
-never change. Every transition is one Lua script call, so concurrent workers and the API cannot race.
+"""The API's operations on jobs: create (validate the plan, idempotency, one transaction for the record
+and the RQ job graph), read and list views, cancel and delete. Records, transitions, events and the chunk
+bookkeeping live in ``hgcore.jobs.records.JobRecords``, which this class extends; the job graph in
+``hgcore.jobs.queue_graph``; statuses in ``hgcore.jobs.status``.
 """
 
 from __future__ import annotations
@@ -33,112 +16,38 @@ from typing import Any
 
 import redis
 import redis.asyncio as aioredis
-from rq import Queue, Retry
+from rq import Queue
 from rq.command import send_stop_job_command
 from rq.exceptions import InvalidJobOperation, NoSuchJobError
-from rq.job import Dependency
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
-from hgcore.artifacts.keys import input_key, job_prefix, manifest_key, scene_key
-from hgcore.settings import Settings
-from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
-from service.models import (
-    TERMINAL_STATUSES,
-    ChunkView,
-    JobStatus,
-    JobTimings,
-    JobView,
-    Priority,
+from hgcore.artifacts.keys import input_key, job_prefix
+from hgcore.jobs.keys import (
+    JOBS_BY_STATE,
+    JOBS_INDEX,
+    chunks_key,
+    job_key,
+    owner_index_key,
+    scene_document_key,
 )
+from hgcore.jobs.keys import idempotency_key as idempotency_redis_key
+from hgcore.jobs.queue_graph import PRIORITY_QUEUES, enqueue_job_graph, rq_ids
+from hgcore.jobs.records import JobNotFoundError, JobRecords, decode_hash
+from hgcore.jobs.status import TERMINAL_STATUSES, JobStatus, Priority
+from hgcore.jobs.views import JobView, build_view
+from hgcore.settings import Settings
+from hgcore.store.base import ArtifactStore
 
-PRIORITY_QUEUES: dict[str, str] = {"high": "high", "normal": "default", "low": "low"}
-CHUNK_TASK = "worker.tasks.render_chunk_task"
-MERGE_TASK = "worker.tasks.merge_task"
-RENDER_JOB_TASK = "worker.tasks.render_job_task"
-FINAL_STEP_TASKS = frozenset({MERGE_TASK, RENDER_JOB_TASK})
-"""Tasks that end a job: when one fails for good, the job fails (``worker.tasks.fail_job``)."""
-
-_JOB_KEY = "hgrender:job:{}"
-_CHUNKS_KEY = "hgrender:job:{}:chunks"
-_SCENE_KEY = "hgrender:job:{}:scene"
-_INDEX_KEY = "hgrender:jobs"
-_OWNER_INDEX_KEY = "hgrender:jobs:owner:{}"
-_BY_STATE_KEY = "hgrender:jobs:by_state"
-_IDEMPOTENCY_KEY = "hgrender:idempotency:{}:{}"
-EVENTS_CHANNEL = "hgrender:events:{}"
 _IDEMPOTENCY_WAIT_S = 2.0
-
-# KEYS: job hash, by-state hash. ARGV: new status, n allowed, allowed..., then field/value pairs to set.
-# Returns the previous status, or false when the job is missing or the transition is not allowed.
-_TRANSITION_LUA = """
-local current = redis.call('HGET', KEYS[1], 'status')
-if not current then return false end
-local n = tonumber(ARGV[2])
-for i = 3, 2 + n do
-  if ARGV[i] == current then
-    redis.call('HSET', KEYS[1], 'status', ARGV[1])
-    for j = 3 + n, #ARGV, 2 do redis.call('HSET', KEYS[1], ARGV[j], ARGV[j + 1]) end
-    redis.call('HINCRBY', KEYS[2], current, -1)
-    redis.call('HINCRBY', KEYS[2], ARGV[1], 1)
-    return current
-  end
-end
-return false
-"""
-
-# KEYS: job hash. ARGV: progress, channel, payload. Publishes the payload only when the progress exceeds
-# every progress published before for this job: chunks on different workers aggregate concurrently, and a
-# retried chunk restarts at 0, but a job's published progress never goes backwards.
-_PUBLISH_PROGRESS_LUA = """
-local last = tonumber(redis.call('HGET', KEYS[1], 'progress_published') or '-1')
-local progress = tonumber(ARGV[1])
-if progress <= last then return 0 end
-redis.call('HSET', KEYS[1], 'progress_published', ARGV[1])
-redis.call('PUBLISH', ARGV[2], ARGV[3])
-return 1
-"""
-
-ALLOWED_FROM: dict[JobStatus, tuple[JobStatus, ...]] = {
-    JobStatus.RUNNING: (JobStatus.QUEUED,),
-    JobStatus.SUCCEEDED: (JobStatus.QUEUED, JobStatus.RUNNING),
-    JobStatus.FAILED: (JobStatus.QUEUED, JobStatus.RUNNING),
-    JobStatus.CANCELED: (JobStatus.QUEUED, JobStatus.RUNNING),
-}
-
-
-class JobNotFoundError(KeyError):
-    """No job with this id (or not visible to the caller)."""
 
 
 class JobConflictError(Exception):
     """The operation does not apply in the job's current status (HTTP 409)."""
 
 
-def chunk_rq_id(job_id: str, index: int) -> str:
-    return f"{job_id}-chunk-{index}"
-
-
-def merge_rq_id(job_id: str) -> str:
-    """RQ id of the job's final step: its merge, or its only step when it has one chunk."""
-    return f"{job_id}-merge"
-
-
-def rq_ids(job_id: str, chunk_count: int) -> list[str]:
-    chunk_ids = [chunk_rq_id(job_id, i) for i in range(chunk_count)] if chunk_count > 1 else []
-    return [*chunk_ids, merge_rq_id(job_id)]
-
-
-def _decode(mapping: Mapping[bytes, bytes]) -> dict[str, str]:
-    return {k.decode(): v.decode() for k, v in mapping.items()}
-
-
-def _float_or_none(value: str | None) -> float | None:
-    return float(value) if value not in (None, "") else None
-
-
-class JobService:
-    """Operations on jobs, shared by the API (``service.api``) and the queue tasks (``worker.tasks``)."""
+class JobService(JobRecords):
+    """Create, read, list, cancel and delete jobs (the API's side; workers use ``JobRecords``)."""
 
     def __init__(
         self,
@@ -147,12 +56,8 @@ class JobService:
         settings: Settings,
         aclient: aioredis.Redis | None = None,
     ) -> None:
-        self.client = client
+        super().__init__(client, store, settings)
         self.aclient = aclient  # the API's asyncio client, for the hot read path (aget)
-        self.store = store
-        self.settings = settings
-        self._transition_script = client.register_script(_TRANSITION_LUA)
-        self._publish_progress_script = client.register_script(_PUBLISH_PROGRESS_LUA)
         # Queue objects cache the server version RQ asks for on every enqueue.
         self._queues = {name: Queue(name, connection=client) for name in PRIORITY_QUEUES.values()}
 
@@ -223,7 +128,7 @@ class JobService:
         """Claim the key for ``job_id``; if an earlier request holds it, return that job (waiting up to
         ``_IDEMPOTENCY_WAIT_S`` for a concurrent request to commit it). A claim whose job never appeared
         (its request failed) is taken over."""
-        key = _IDEMPOTENCY_KEY.format(owner, idempotency_key)
+        key = idempotency_redis_key(owner, idempotency_key)
         ttl_s = self.settings.idempotency_ttl_s
         if self.client.set(key, job_id, nx=True, ex=ttl_s):
             return None
@@ -250,115 +155,35 @@ class JobService:
     ) -> None:
         with self.client.pipeline() as pipe:
             pipe.multi()
-            pipe.hset(_JOB_KEY.format(job_id), mapping=record)
-            pipe.set(_SCENE_KEY.format(job_id), json.dumps(scene, separators=(",", ":")))
-            pipe.hset(
-                _CHUNKS_KEY.format(job_id), mapping={f"{i}.status": "queued" for i in range(chunk_count)}
-            )
-            pipe.zadd(_INDEX_KEY, {job_id: now})
-            pipe.zadd(_OWNER_INDEX_KEY.format(owner), {job_id: now})
-            pipe.hincrby(_BY_STATE_KEY, JobStatus.QUEUED.value, 1)
-            self._enqueue(pipe, job_id, chunk_count, PRIORITY_QUEUES[priority])
+            pipe.hset(job_key(job_id), mapping=record)
+            pipe.set(scene_document_key(job_id), json.dumps(scene, separators=(",", ":")))
+            pipe.hset(chunks_key(job_id), mapping={f"{i}.status": "queued" for i in range(chunk_count)})
+            pipe.zadd(JOBS_INDEX, {job_id: now})
+            pipe.zadd(owner_index_key(owner), {job_id: now})
+            pipe.hincrby(JOBS_BY_STATE, JobStatus.QUEUED.value, 1)
+            queue = self._queues[PRIORITY_QUEUES[priority]]
+            enqueue_job_graph(pipe, queue, job_id, chunk_count, self.settings)
             pipe.execute()
 
-    def _enqueue(self, pipe: redis.client.Pipeline, job_id: str, chunk_count: int, queue_name: str) -> None:
-        """Add the chunk jobs (queued) and the merge job (deferred on all chunks, failures allowed), or
-        for a one-chunk job the single job that renders and merges."""
-        queue = self._queues[queue_name]
-        retry = (
-            Retry(max=self.settings.chunk_retry_max, interval=self.settings.chunk_retry_intervals_s)
-            if self.settings.chunk_retry_max > 0
-            else None
-        )
-        common: dict[str, Any] = {
-            "timeout": self.settings.job_timeout_s,
-            "result_ttl": self.settings.result_ttl_s,
-            "failure_ttl": self.settings.result_ttl_s,
-            "retry": retry,
-        }
-        if chunk_count == 1:
-            render = queue.create_job(
-                RENDER_JOB_TASK,
-                args=(job_id,),
-                job_id=merge_rq_id(job_id),
-                description=f"render and merge job {job_id}",
-                **common,
-            )
-            queue.enqueue_job(render, pipeline=pipe)
-            return
-        chunk_ids = [chunk_rq_id(job_id, index) for index in range(chunk_count)]
-        for index, rq_id in enumerate(chunk_ids):
-            chunk = queue.create_job(
-                CHUNK_TASK,
-                args=(job_id, index),
-                job_id=rq_id,
-                description=f"render chunk {index} of job {job_id}",
-                **common,
-            )
-            queue.enqueue_job(chunk, pipeline=pipe)
-        merge = queue.create_job(
-            MERGE_TASK,
-            args=(job_id,),
-            job_id=merge_rq_id(job_id),
-            description=f"merge job {job_id}",
-            depends_on=Dependency(jobs=chunk_ids, allow_failure=True),
-            status=RQJobStatus.DEFERRED,
-            **common,
-        )
-        merge.origin = queue.name
-        merge.save(pipeline=pipe)
-        merge.register_dependency(pipeline=pipe)
-        pipe.sadd(queue.redis_queues_keys, queue.key)
-
-    def scene(self, job_id: str) -> dict[str, Any]:
-        """The job's validated scene document: kept in Redis with the record (so a submission touches no
-        disk), and copied to the store as ``scene.json`` with the final artifacts."""
-        data = self.client.get(_SCENE_KEY.format(job_id))
-        if data is None:
-            try:
-                data = self.store.get_bytes(scene_key(job_id))
-            except ArtifactNotFoundError:
-                raise JobNotFoundError(job_id) from None
-        return json.loads(data)
-
     # ---- reading --------------------------------------------------------------------------------------
-
-    def get(self, job_id: str) -> JobView | None:
-        """The job's current view, or (when Redis lost it) the one in its manifest; None if unknown."""
-        with self.client.pipeline(transaction=False) as pipe:
-            pipe.hgetall(_JOB_KEY.format(job_id))
-            pipe.hgetall(_CHUNKS_KEY.format(job_id))
-            record, chunk_fields = pipe.execute()
-        if record:
-            return build_view(_decode(record), _decode(chunk_fields))
-        return self._view_from_manifest(job_id)
 
     async def aget(self, job_id: str) -> JobView | None:
         """``get`` on the asyncio client (the API's most frequent request stays off the thread pool)."""
         if self.aclient is None:
             raise RuntimeError("aclient: JobService was built without an asyncio Redis client")
         async with self.aclient.pipeline(transaction=False) as pipe:
-            pipe.hgetall(_JOB_KEY.format(job_id))
-            pipe.hgetall(_CHUNKS_KEY.format(job_id))
+            pipe.hgetall(job_key(job_id))
+            pipe.hgetall(chunks_key(job_id))
             record, chunk_fields = await pipe.execute()
         if record:
-            return build_view(_decode(record), _decode(chunk_fields))
+            return build_view(decode_hash(record), decode_hash(chunk_fields))
         return await asyncio.to_thread(self._view_from_manifest, job_id)
-
-    def _view_from_manifest(self, job_id: str) -> JobView | None:
-        if not job_id.isalnum():
-            return None
-        try:
-            manifest = json.loads(self.store.get_bytes(manifest_key(job_id)))
-        except (ArtifactNotFoundError, ValueError):
-            return None
-        return JobView.model_validate(manifest["job"])
 
     def list(
         self, owner: str | None, status: JobStatus | None, offset: int, limit: int
     ) -> tuple[list[JobView], int]:
         """Jobs newest first, of one owner (None: all), optionally of one status; (page, total)."""
-        index = _INDEX_KEY if owner is None else _OWNER_INDEX_KEY.format(owner)
+        index = JOBS_INDEX if owner is None else owner_index_key(owner)
         if status is None:
             total = int(self.client.zcard(index))
             ids = [i.decode() for i in self.client.zrevrange(index, offset, offset + limit - 1)]
@@ -367,7 +192,7 @@ class JobService:
         ids = [i.decode() for i in self.client.zrevrange(index, 0, -1)]
         with self.client.pipeline(transaction=False) as pipe:
             for job_id in ids:
-                pipe.hget(_JOB_KEY.format(job_id), "status")
+                pipe.hget(job_key(job_id), "status")
             statuses = pipe.execute()
         matching = [i for i, s in zip(ids, statuses, strict=True) if s is not None and s.decode() == status]
         return self._views(matching[offset : offset + limit]), len(matching)
@@ -376,36 +201,20 @@ class JobService:
         """Views of several jobs in one round trip (jobs deleted meanwhile are left out)."""
         with self.client.pipeline(transaction=False) as pipe:
             for job_id in job_ids:
-                pipe.hgetall(_JOB_KEY.format(job_id))
-                pipe.hgetall(_CHUNKS_KEY.format(job_id))
+                pipe.hgetall(job_key(job_id))
+                pipe.hgetall(chunks_key(job_id))
             replies = pipe.execute()
         return [
-            build_view(_decode(record), _decode(chunk_fields))
+            build_view(decode_hash(record), decode_hash(chunk_fields))
             for record, chunk_fields in zip(replies[::2], replies[1::2], strict=True)
             if record
         ]
 
     def counts_by_state(self) -> dict[str, int]:
-        counts = {k: int(v) for k, v in _decode(self.client.hgetall(_BY_STATE_KEY)).items()}
+        counts = {k: int(v) for k, v in decode_hash(self.client.hgetall(JOBS_BY_STATE)).items()}
         return {s.value: counts.get(s.value, 0) for s in JobStatus}
 
-    # ---- transitions ----------------------------------------------------------------------------------
-
-    def transition(self, job_id: str, new_status: JobStatus, **fields: str) -> JobStatus | None:
-        """Move the job to ``new_status`` if allowed; returns the previous status, or None if not moved."""
-        allowed = [s.value for s in ALLOWED_FROM[new_status]]
-        pairs = [str(x) for kv in fields.items() for x in kv]
-        previous = self._transition_script(
-            keys=[_JOB_KEY.format(job_id), _BY_STATE_KEY],
-            args=[new_status.value, len(allowed), *allowed, *pairs],
-        )
-        if previous is None:
-            return None
-        self.publish(job_id, {"type": "status", "status": new_status.value})
-        return JobStatus(previous.decode())
-
-    def publish(self, job_id: str, event: dict[str, Any]) -> None:
-        self.client.publish(EVENTS_CHANNEL.format(job_id), json.dumps(event))
+    # ---- cancel and delete ----------------------------------------------------------------------------
 
     def cancel(self, job_id: str) -> JobView:
         """Mark the job canceled, drop its queued RQ jobs and stop the running ones (the work horse is
@@ -440,7 +249,7 @@ class JobService:
 
     def delete(self, job_id: str) -> None:
         """Remove the job everywhere: stop it if needed, then its RQ jobs, record, indexes, artifacts."""
-        record = _decode(self.client.hgetall(_JOB_KEY.format(job_id)))
+        record = decode_hash(self.client.hgetall(job_key(job_id)))
         if record and JobStatus(record["status"]) not in TERMINAL_STATUSES:
             self.cancel(job_id)
             record["status"] = JobStatus.CANCELED.value
@@ -449,154 +258,10 @@ class JobService:
             with contextlib.suppress(NoSuchJobError):
                 RQJob.fetch(rq_id, connection=self.client).delete()
         with self.client.pipeline() as pipe:
-            pipe.delete(_JOB_KEY.format(job_id), _CHUNKS_KEY.format(job_id), _SCENE_KEY.format(job_id))
-            pipe.zrem(_INDEX_KEY, job_id)
+            pipe.delete(job_key(job_id), chunks_key(job_id), scene_document_key(job_id))
+            pipe.zrem(JOBS_INDEX, job_id)
             if record:
-                pipe.zrem(_OWNER_INDEX_KEY.format(record["owner"]), job_id)
-                pipe.hincrby(_BY_STATE_KEY, record["status"], -1)
+                pipe.zrem(owner_index_key(record["owner"]), job_id)
+                pipe.hincrby(JOBS_BY_STATE, record["status"], -1)
             pipe.execute()
         self.store.delete_prefix(job_prefix(job_id))
-
-    # ---- worker-side bookkeeping ----------------------------------------------------------------------
-
-    def record(self, job_id: str) -> dict[str, str]:
-        return _decode(self.client.hgetall(_JOB_KEY.format(job_id)))
-
-    def status(self, job_id: str) -> JobStatus | None:
-        value = self.client.hget(_JOB_KEY.format(job_id), "status")
-        return JobStatus(value.decode()) if value is not None else None
-
-    def chunk_started(
-        self, job_id: str, index: int | str, worker: str, pid: int, spp: int | None = None
-    ) -> None:
-        """A work horse (process ``pid`` of ``worker``) began chunk ``index`` (or ``merge``)."""
-        prefix = f"{index}."
-        with self.client.pipeline() as pipe:
-            pipe.hset(
-                _CHUNKS_KEY.format(job_id),
-                mapping={
-                    prefix + "status": "running",
-                    prefix + "progress": "0",
-                    prefix + "worker": worker,
-                    prefix + "pid": str(pid),
-                    prefix + "spp": "" if spp is None else str(spp),
-                    prefix + "started_at": repr(time.time()),
-                },
-            )
-            pipe.hincrby(_CHUNKS_KEY.format(job_id), prefix + "attempts", 1)
-            pipe.execute()
-        self.transition(job_id, JobStatus.RUNNING, started_at=repr(time.time()))
-
-    def chunk_progress(self, job_id: str, index: int, fraction: float) -> None:
-        """Store one chunk's progress and publish the job's aggregated progress."""
-        fraction = min(1.0, max(0.0, fraction))
-        with self.client.pipeline(transaction=False) as pipe:
-            pipe.hset(_CHUNKS_KEY.format(job_id), f"{index}.progress", repr(fraction))
-            pipe.hgetall(_JOB_KEY.format(job_id))
-            pipe.hgetall(_CHUNKS_KEY.format(job_id))
-            _, record, chunk_fields = pipe.execute()
-        if record:
-            view = build_view(_decode(record), _decode(chunk_fields))
-            event = {
-                "type": "progress",
-                "progress": view.progress,
-                "chunks_done": view.chunks_done,
-                "chunks_total": view.chunks_total,
-                "eta_s": view.eta_s,
-            }
-            self._publish_progress_script(
-                keys=[_JOB_KEY.format(job_id)],
-                args=[repr(view.progress), EVENTS_CHANNEL.format(job_id), json.dumps(event)],
-            )
-
-    def chunk_finished(self, job_id: str, index: int | str, samples: int, seconds: float) -> None:
-        """A chunk (or ``merge``) completed: count the completion (tests check it is counted once)."""
-        prefix = f"{index}."
-        with self.client.pipeline() as pipe:
-            pipe.hset(
-                _CHUNKS_KEY.format(job_id),
-                mapping={
-                    prefix + "status": "done",
-                    prefix + "progress": "1",
-                    prefix + "samples": str(samples),
-                    prefix + "seconds": repr(seconds),
-                    prefix + "finished_at": repr(time.time()),
-                },
-            )
-            pipe.hincrby(_CHUNKS_KEY.format(job_id), prefix + "completions", 1)
-            pipe.incrbyfloat("hgrender:metrics:render_seconds_total", seconds)
-            pipe.incrby("hgrender:metrics:samples_total", samples)
-            pipe.execute()
-        if index != "merge":
-            self.chunk_progress(job_id, int(index), 1.0)
-
-    def chunk_fields(self, job_id: str) -> dict[str, str]:
-        """The raw ``<i>.<field>`` / ``merge.<field>`` bookkeeping of a job's chunks."""
-        return _decode(self.client.hgetall(_CHUNKS_KEY.format(job_id)))
-
-    def chunk_completions(self, job_id: str) -> dict[str, int]:
-        """How many times each chunk (and ``merge``) ran to completion."""
-        fields = self.chunk_fields(job_id)
-        return {
-            k.removesuffix(".completions"): int(v) for k, v in fields.items() if k.endswith(".completions")
-        }
-
-    def set_chunk_status(self, job_id: str, index: int | str, status: str) -> None:
-        self.client.hset(_CHUNKS_KEY.format(job_id), f"{index}.status", status)
-
-
-def build_view(record: dict[str, str], chunk_fields: dict[str, str], now: float | None = None) -> JobView:
-    """Aggregate a record and its chunk fields into the API view (progress = mean chunk fraction)."""
-    now = time.time() if now is None else now
-    chunk_count = int(record["chunks"])
-    status = JobStatus(record["status"])
-    chunks = [
-        ChunkView(
-            index=i,
-            status=chunk_fields.get(f"{i}.status", "queued"),  # type: ignore[arg-type]
-            progress=float(chunk_fields.get(f"{i}.progress", "0") or 0),
-            spp=int(chunk_fields[f"{i}.spp"]) if chunk_fields.get(f"{i}.spp") else None,
-            worker=chunk_fields.get(f"{i}.worker") or None,
-            attempts=int(chunk_fields.get(f"{i}.attempts", "0")),
-            samples=int(chunk_fields[f"{i}.samples"]) if chunk_fields.get(f"{i}.samples") else None,
-            seconds=_float_or_none(chunk_fields.get(f"{i}.seconds")),
-        )
-        for i in range(chunk_count)
-    ]
-    chunks_done = sum(1 for c in chunks if c.status == "done")
-    progress = 1.0 if status == JobStatus.SUCCEEDED else sum(c.progress for c in chunks) / max(1, chunk_count)
-    if status != JobStatus.SUCCEEDED:
-        progress = min(progress, 0.999)  # the merge step is still to come
-    created_at = float(record["created_at"])
-    started_at = _float_or_none(record.get("started_at"))
-    finished_at = _float_or_none(record.get("finished_at"))
-    eta_s = None
-    if status == JobStatus.RUNNING and started_at is not None and progress > 0:
-        eta_s = max(0.0, (now - started_at) * (1.0 - progress) / progress)
-    render_seconds = [c.seconds for c in chunks if c.seconds is not None]
-    workers = sorted({c.worker for c in chunks if c.worker} | {chunk_fields.get("merge.worker") or ""} - {""})
-    return JobView(
-        id=record["id"],
-        owner=record["owner"],
-        name=record.get("name") or None,
-        status=status,
-        progress=progress,
-        eta_s=eta_s,
-        priority=record["priority"],  # type: ignore[arg-type]
-        spp=int(record["spp"]),
-        seed=int(record["seed"]),
-        chunks_total=chunk_count,
-        chunks_done=chunks_done,
-        workers=workers,
-        error=record.get("error") or None,
-        timings=JobTimings(
-            created_at=created_at,
-            started_at=started_at,
-            finished_at=finished_at,
-            queue_wait_s=started_at - created_at if started_at is not None else None,
-            render_s=sum(render_seconds) if render_seconds else None,
-            merge_s=_float_or_none(chunk_fields.get("merge.seconds")),
-            total_s=finished_at - created_at if finished_at is not None else None,
-        ),
-        chunks=chunks,
-    )

@@ -1,26 +1,17 @@
-"""Request and response bodies of the HTTP API (pydantic v2); their examples feed the OpenAPI document."""
+"""Request and response bodies of the HTTP API (pydantic v2); their examples feed the OpenAPI document.
+
+The job's own view (``JobView``) and statuses are the job domain's (``hgcore.jobs``); this module holds
+what only the API speaks: request bodies, lists, artifacts, tokens and error bodies.
+"""
 
 from __future__ import annotations
 
-from enum import StrEnum
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-
-class JobStatus(StrEnum):
-    QUEUED = "queued"
-    RUNNING = "running"
-    SUCCEEDED = "succeeded"
-    FAILED = "failed"
-    CANCELED = "canceled"
-
-
-TERMINAL_STATUSES: frozenset[JobStatus] = frozenset(
-    {JobStatus.SUCCEEDED, JobStatus.FAILED, JobStatus.CANCELED}
-)
-
-Priority = Literal["high", "normal", "low"]
+from hgcore.jobs.status import JobStatus, Priority
+from hgcore.jobs.views import JobView
 
 
 class JobOptions(BaseModel):
@@ -105,68 +96,6 @@ class JobCreate(JobOptions):
 class JobCreated(BaseModel):
     id: str = Field(examples=["3f2a9c0d4b1e4f6a8d7c6b5a4e3d2c1b"])
     status: JobStatus = Field(examples=["queued"])
-
-
-class ChunkView(BaseModel):
-    index: int
-    status: Literal["queued", "running", "done", "failed", "canceled"]
-    progress: float = Field(ge=0.0, le=1.0)
-    spp: int | None = None
-    worker: str | None = None
-    attempts: int = 0
-    samples: int | None = None
-    seconds: float | None = None
-
-
-class JobTimings(BaseModel):
-    created_at: float = Field(description="Unix time (s).")
-    started_at: float | None = Field(None, description="First chunk started (Unix time, s).")
-    finished_at: float | None = Field(None, description="Reached a final status (Unix time, s).")
-    queue_wait_s: float | None = None
-    render_s: float | None = Field(None, description="Sum of chunk render times (s).")
-    merge_s: float | None = None
-    total_s: float | None = None
-
-
-class JobView(BaseModel):
-    """``GET /v1/jobs/{id}``."""
-
-    id: str
-    owner: str
-    name: str | None = None
-    status: JobStatus
-    progress: float = Field(ge=0.0, le=1.0, description="Fraction done, aggregated over chunks.")
-    eta_s: float | None = Field(None, description="Estimated seconds to completion while running.")
-    priority: Priority
-    spp: int
-    seed: int
-    chunks_total: int
-    chunks_done: int
-    workers: list[str] = Field(default_factory=list, description="Workers that ran chunks or the merge.")
-    error: str | None = None
-    timings: JobTimings
-    chunks: list[ChunkView] = Field(default_factory=list)
-
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "id": "3f2a9c0d4b1e4f6a8d7c6b5a4e3d2c1b",
-                    "owner": "alice",
-                    "status": "running",
-                    "progress": 0.42,
-                    "eta_s": 12.5,
-                    "priority": "normal",
-                    "spp": 64,
-                    "seed": 1234,
-                    "chunks_total": 4,
-                    "chunks_done": 1,
-                    "workers": ["worker-a"],
-                    "timings": {"created_at": 1795300000.0, "started_at": 1795300000.2},
-                }
-            ]
-        }
-    )
 
 
 class JobList(BaseModel):

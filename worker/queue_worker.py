@@ -40,10 +40,11 @@ from rq.job import Job, JobStatus
 from rq.registry import StartedJobRegistry
 from rq.utils import now
 
+from hgcore.jobs.queue_graph import FINAL_STEP_TASKS
+from hgcore.jobs.records import JobRecords
 from hgcore.redis_clients import redis_client
 from hgcore.settings import QUEUE_NAMES, Settings
 from hgcore.store import store_from_settings
-from service.jobs import FINAL_STEP_TASKS, JobService
 
 
 class RenderWorker(Worker):
@@ -121,7 +122,7 @@ class RenderWorker(Worker):
             return
         from worker.tasks import fail_job  # the worker process has it loaded (preload_renderer)
 
-        jobs = JobService(self.connection, store_from_settings(self.settings), self.settings)
+        jobs = JobRecords(self.connection, store_from_settings(self.settings), self.settings)
         fail_job(jobs, job.args[0], f"{job.description}: {reason}")
 
     def request_force_stop(self, signum: int, frame: FrameType | None) -> None:

@@ -42,12 +42,13 @@ from hgcore.artifacts.keys import (
     worker_log_key,
 )
 from hgcore.artifacts.pixel_sums import PixelSums
+from hgcore.jobs.queue_graph import chunk_rq_id
+from hgcore.jobs.records import JobRecords
+from hgcore.jobs.status import TERMINAL_STATUSES, JobStatus
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
 from schemas.scene import MAX_FILM_MODES, Scene
-from service.jobs import JobService, chunk_rq_id
-from service.models import TERMINAL_STATUSES, JobStatus
 
 if TYPE_CHECKING:
     from worker.render.api import RenderedChunk
@@ -120,18 +121,18 @@ def task_settings() -> Settings:
     return Settings()
 
 
-def _context() -> tuple[JobService, RQJob]:
+def _context() -> tuple[JobRecords, RQJob]:
     rq_job = get_current_job()
     if rq_job is None:
         raise RuntimeError("worker.tasks functions run inside an RQ work horse (hgrender worker)")
     settings = task_settings()
-    return JobService(rq_job.connection, store_from_settings(settings), settings), rq_job
+    return JobRecords(rq_job.connection, store_from_settings(settings), settings), rq_job
 
 
 class _ProgressReporter:
     """Forwards a chunk's progress to Redis, at most once per ``interval_s``."""
 
-    def __init__(self, jobs: JobService, job_id: str, index: int, interval_s: float) -> None:
+    def __init__(self, jobs: JobRecords, job_id: str, index: int, interval_s: float) -> None:
         self.jobs, self.job_id, self.index, self.interval_s = jobs, job_id, index, interval_s
         self._last_s = 0.0
 
@@ -145,7 +146,7 @@ class _ProgressReporter:
 class _CancelPoll:
     """``should_stop`` for the renderer: True once the job was canceled or deleted."""
 
-    def __init__(self, jobs: JobService, job_id: str) -> None:
+    def __init__(self, jobs: JobRecords, job_id: str) -> None:
         self.jobs, self.job_id = jobs, job_id
         self._last_s = 0.0
         self._stop = False
@@ -158,7 +159,7 @@ class _CancelPoll:
         return self._stop
 
 
-def _load_inputs(jobs: JobService, job_id: str, work_dir: Path) -> tuple[dict[str, Any], Path | None]:
+def _load_inputs(jobs: JobRecords, job_id: str, work_dir: Path) -> tuple[dict[str, Any], Path | None]:
     """The job's scene and, for an uploaded bundle, the local folder its files were copied to (the
     renderer resolves the scene's relative file paths against it)."""
     inputs_prefix = input_prefix(job_id)
@@ -192,7 +193,7 @@ def _step(name: str) -> Iterator[None]:
 
 
 def _render_chunk(
-    jobs: JobService, rq_job: RQJob, job_id: str, record: dict[str, str], chunk_index: int, work_dir: Path
+    jobs: JobRecords, rq_job: RQJob, job_id: str, record: dict[str, str], chunk_index: int, work_dir: Path
 ) -> tuple[RenderedChunk, Scene] | None:
     """Render one chunk (its sums in memory) and return it with the validated scene, or None when the job
     was canceled meanwhile. Bundle inputs are copied to ``work_dir``."""
@@ -262,7 +263,7 @@ def render_job_task(job_id: str) -> dict[str, Any]:
         raise
 
 
-def _chunk_failures(jobs: JobService, job_id: str, chunk_count: int) -> list[str]:
+def _chunk_failures(jobs: JobRecords, job_id: str, chunk_count: int) -> list[str]:
     """One line per chunk that did not finish: its index and last error."""
     failures = []
     for index in range(chunk_count):
@@ -278,7 +279,7 @@ def _chunk_failures(jobs: JobService, job_id: str, chunk_count: int) -> list[str
     return failures
 
 
-def _worker_log(jobs: JobService, job_id: str) -> bytes:
+def _worker_log(jobs: JobRecords, job_id: str) -> bytes:
     """A plain-text log of who rendered what, in how many attempts and how long."""
     view = jobs.get(job_id)
     assert view is not None
@@ -291,7 +292,7 @@ def _worker_log(jobs: JobService, job_id: str) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
-def _artifact_digests(jobs: JobService, job_id: str) -> list[dict[str, Any]]:
+def _artifact_digests(jobs: JobRecords, job_id: str) -> list[dict[str, Any]]:
     """Name, size and SHA-256 of every stored artifact of the job (streamed, never all in memory)."""
     digests = []
     for info in jobs.store.list(job_prefix(job_id)):
@@ -306,14 +307,14 @@ def _artifact_digests(jobs: JobService, job_id: str) -> list[dict[str, Any]]:
 
 
 def _write_manifest(
-    jobs: JobService,
+    jobs: JobRecords,
     job_id: str,
     artifacts: list[dict[str, Any]],
     overrides: dict[str, Any],
     **timing_overrides: float,
 ) -> None:
     """``manifest.json``: the job's final view and every artifact's size and SHA-256, so results outlive
-    the loss of Redis (``JobService.get`` falls back to it). ``overrides`` replace view fields and
+    the loss of Redis (``JobRecords.get`` falls back to it). ``overrides`` replace view fields and
     ``timing_overrides`` timing fields (the final values, written before the status changes)."""
     view = jobs.get(job_id)
     assert view is not None
@@ -323,7 +324,7 @@ def _write_manifest(
     jobs.store.put_bytes(manifest_key(job_id), json.dumps(manifest, indent=1).encode())
 
 
-def _fail(jobs: JobService, job_id: str, error: str) -> None:
+def _fail(jobs: JobRecords, job_id: str, error: str) -> None:
     """Record a failed job: its log and manifest first, then the final status."""
     finished_at = time.time()
     jobs.store.put_bytes(worker_log_key(job_id), _worker_log(jobs, job_id) + f"error: {error}\n".encode())
@@ -335,13 +336,13 @@ def _fail(jobs: JobService, job_id: str, error: str) -> None:
         _write_manifest(jobs, job_id, artifacts, {})  # canceled meanwhile
 
 
-def _fail_on_last_attempt(jobs: JobService, rq_job: RQJob, job_id: str, error: str) -> None:
+def _fail_on_last_attempt(jobs: JobRecords, rq_job: RQJob, job_id: str, error: str) -> None:
     """Fail the job when this attempt of its final step was the last (RQ retries the others)."""
     if not rq_job.retries_left:
         fail_job(jobs, job_id, error)
 
 
-def fail_job(jobs: JobService, job_id: str, error: str) -> None:
+def fail_job(jobs: JobRecords, job_id: str, error: str) -> None:
     """Fail the job unless it already ended (it may have been canceled or deleted meanwhile). Also called
     by the worker when a final step's work horse died on its last attempt (``worker.queue_worker``)."""
     if jobs.status(job_id) not in {*TERMINAL_STATUSES, None}:
@@ -376,14 +377,14 @@ def merge_task(job_id: str) -> dict[str, Any]:
         raise
 
 
-def _merge_started(jobs: JobService, rq_job: RQJob, job_id: str) -> float:
+def _merge_started(jobs: JobRecords, rq_job: RQJob, job_id: str) -> float:
     """Record the merge step as running; its start on the monotonic clock (seconds)."""
     jobs.chunk_started(job_id, "merge", rq_job.worker_name or "", os.getpid())
     return time.monotonic()
 
 
 def _write_final_artifacts(
-    jobs: JobService,
+    jobs: JobRecords,
     job_id: str,
     work_dir: Path,
     chunk_sums: list[PixelSums],

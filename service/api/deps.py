@@ -14,11 +14,12 @@ import redis
 from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
+from hgcore.jobs.records import JobNotFoundError
+from hgcore.jobs.views import JobView
 from hgcore.settings import Settings
 from hgcore.store.base import ArtifactStore
 from service.auth import LOCAL_DEVELOPER, AuthenticationError, Principal, RequestAuthenticator, TokenRegistry
-from service.jobs import JobNotFoundError, JobService
-from service.models import JobView
+from service.jobs import JobService
 
 _bearer = HTTPBearer(
     auto_error=False, description="API token (`hgrender token create`; `<data dir>/admin.token`)."

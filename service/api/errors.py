@@ -12,10 +12,11 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 
+from hgcore.jobs.records import JobNotFoundError
 from hgcore.store.base import ArtifactNotFoundError
 from schemas import SceneError
 from service.auth import AuthenticationError, PermissionDeniedError, RateLimitedError
-from service.jobs import JobConflictError, JobNotFoundError
+from service.jobs import JobConflictError
 
 
 def problem(status_code: int, detail: str, errors: list[Any] | None = None, **headers: str) -> JSONResponse:

@@ -24,11 +24,12 @@ from rq import Queue, get_current_job
 from rq.job import Dependency
 
 from hgcore.artifacts.keys import artifact_key
+from hgcore.jobs.queue_graph import merge_rq_id
+from hgcore.jobs.status import JobStatus
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
-from service.jobs import JobService, merge_rq_id
-from service.models import JobStatus
+from service.jobs import JobService
 from service.regression.images import load_render_outputs
 from service.regression.metrics import compare_renders
 from service.regression.models import RunView, SceneResult, Suite, SuiteScene

@@ -23,9 +23,10 @@ import pytest
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
+from hgcore.jobs.queue_graph import chunk_rq_id
 from hgcore.store import store_from_settings
 from hgrender.client import HgrenderClient
-from service.jobs import JobService, chunk_rq_id
+from service.jobs import JobService
 from tests.service.conftest import LiveService, tiny_scene, wait_for
 
 pytestmark = pytest.mark.slow

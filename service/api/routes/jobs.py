@@ -12,11 +12,13 @@ from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 
 from hgcore.artifacts.keys import job_prefix
+from hgcore.jobs.records import JobNotFoundError
+from hgcore.jobs.status import JobStatus
+from hgcore.jobs.views import JobView
 from hgcore.store.base import validate_key
 from schemas import SceneLimits
 from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
 from service.events import job_events
-from service.jobs import JobNotFoundError
 from service.models import (
     ArtifactList,
     ArtifactView,
@@ -24,8 +26,6 @@ from service.models import (
     JobCreated,
     JobList,
     JobOptions,
-    JobStatus,
-    JobView,
     Problem,
 )
 from service.submissions import scene_from_json, scene_from_upload

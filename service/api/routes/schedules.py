@@ -10,9 +10,9 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
 from fastapi.responses import Response as RawResponse
 
+from hgcore.jobs.records import JobNotFoundError
 from service.api.deps import Reader, Submitter
 from service.auth import Principal
-from service.jobs import JobNotFoundError
 from service.models import Problem
 from service.regression.models import (
     BaselineList,

@@ -17,12 +17,13 @@ from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 
 from hgcore.imaging import TONE_MAPS
+from hgcore.jobs.status import JobStatus
 from hgcore.store.base import ArtifactNotFoundError
 from schemas import EXAMPLES_DIR
 from service.api.deps import JobsDep, Reader, visible_job
 from service.api.routes.jobs import _ERRORS, JobId
 from service.jobs import JobConflictError
-from service.models import JobStatus, Problem
+from service.models import Problem
 from service.viewer_data import (
     COMPARE_MODES,
     DecodedImage,
