@@ -214,6 +214,8 @@ class JobService:
             "status": JobStatus.QUEUED.value,
             "priority": priority,
             "spp": str(spp),
+            "width": str(scene["film"].get("width", "")),
+            "height": str(scene["film"].get("height", "")),
             "seed": str(base_seed),
             "chunks": str(chunk_count),
             "created_at": repr(now),
@@ -596,6 +598,8 @@ def build_view(record: dict[str, str], chunk_fields: dict[str, str], now: float 
         eta_s=eta_s,
         priority=record["priority"],  # type: ignore[arg-type]
         spp=int(record["spp"]),
+        width=int(record["width"]) if record.get("width") else None,
+        height=int(record["height"]) if record.get("height") else None,
         seed=int(record["seed"]),
         chunks_total=chunk_count,
         chunks_done=chunks_done,

@@ -139,6 +139,8 @@ class JobView(BaseModel):
     eta_s: float | None = Field(None, description="Estimated seconds to completion while running.")
     priority: Priority
     spp: int
+    width: int | None = Field(None, description="Image width (px) of the scene's film.")
+    height: int | None = Field(None, description="Image height (px) of the scene's film.")
     seed: int
     chunks_total: int
     chunks_done: int

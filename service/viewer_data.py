@@ -436,6 +436,30 @@ def display_png(image: DecodedImage, exposure_ev: float, operator: str) -> bytes
     return buffer.getvalue()
 
 
+def diagnostics_exr(image: DecodedImage) -> bytes:
+    """The ``coherence.*`` channels (ℓ₁, ℓ₂ in µm at 550 nm, angle, anisotropy, area, r, M, weight) as a
+    float32 OpenEXR file, channel names as in ``image.exr``; ValueError when the image has none."""
+    import OpenImageIO as oiio
+
+    names = sorted(n for n in image.channels if n.startswith("coherence."))
+    if not names:
+        raise ValueError("name: this image has no coherence diagnostics")
+    pixels = np.stack([image.channels[n] for n in names], axis=-1).astype(np.float32)
+    spec = oiio.ImageSpec(image.width, image.height, len(names), oiio.FLOAT)
+    spec.channelnames = tuple(names)
+    spec.attribute("compression", "zip")
+    with tempfile.TemporaryDirectory(prefix="hgrender-diagnostics-") as directory:
+        path = Path(directory) / "diagnostics.exr"
+        output = oiio.ImageOutput.create(str(path))
+        if output is None or not output.open(str(path), spec):
+            raise OSError(f"cannot write {path}: {oiio.geterror()}")
+        try:
+            output.write_image(pixels)
+        finally:
+            output.close()
+        return path.read_bytes()
+
+
 def ellipse_grid(image: DecodedImage, spacing_px: int) -> list[dict[str, float]]:
     """Coherence ellipses on a grid: one per ``spacing_px`` cell that has diagnostics at its centre pixel
     (x = y = spacing/2 + i·spacing, rounded down), with that pixel's ℓ₁, ℓ₂ (µm), angle (rad) and area

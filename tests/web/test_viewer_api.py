@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import json
 import math
+from typing import Any
 
 import httpx
 import numpy as np
@@ -300,3 +301,18 @@ def test_diagonal_cylinder_gives_45_degree_ellipses(
     for ellipse in grid:
         # ℓ₁ ∥ d × (x̂ + ẑ)/√2 projects onto the image diagonal (1, 1) (conftest): angle π/4 (mod π).
         assert abs(math.remainder(ellipse["angle"] - math.pi / 4, math.pi)) < 1e-3
+
+
+def test_diagnostics_exr_holds_the_coherence_channels(
+    served: Served, cylinder_job: RenderedJob, tmp_path: Any
+) -> None:
+    from tests.web.conftest import read_exr
+
+    response = served.get(f"/v1/jobs/{cylinder_job.job_id}/diagnostics.exr")
+    assert response.status_code == 200 and response.headers["content-type"] == "image/x-exr"
+    (tmp_path / "d.exr").write_bytes(response.content)
+    channels = read_exr(tmp_path / "d.exr").channels
+    expected = {n for n in cylinder_job.exr.channels if n.startswith("coherence.")}
+    assert set(channels) == expected and "coherence.l1_um" in expected
+    for name in expected:
+        np.testing.assert_array_equal(channels[name], cylinder_job.exr.channels[name])

@@ -31,6 +31,7 @@ from service.viewer_data import (
     LayerInfo,
     UploadedImages,
     decode_uploaded_exr,
+    diagnostics_exr,
     difference_map,
     display_png,
     ellipse_grid,
@@ -243,6 +244,21 @@ async def get_display_png(
     """`hgrender.imaging.display_rgb8(rgb, ev, tonemap)` of the full-resolution image."""
     image = await _image(request, jobs, principal, job_id)
     return Response(await run_in_threadpool(display_png, image, ev, tonemap), media_type="image/png")
+
+
+@router.get(
+    "/v1/jobs/{job_id}/diagnostics.exr",
+    summary="The coherence diagnostics as an OpenEXR file",
+    response_class=Response,
+    responses={**_IMAGE_ERRORS, 200: {"content": {"image/x-exr": {}}, "description": "float32 EXR."}},
+)
+async def get_diagnostics_exr(request: Request, job_id: JobId, jobs: JobsDep, principal: Reader) -> Response:
+    """Every `coherence.*` channel of the image (ℓ₁, ℓ₂ in µm at 550 nm, angle in rad, anisotropy, area
+    in µm², r in m, M in m⁻², weight), float32, the channel names of `image.exr`."""
+    image = await _image(request, jobs, principal, job_id)
+    body = await run_in_threadpool(diagnostics_exr, image)
+    disposition = f'attachment; filename="{job_id}_diagnostics.exr"'
+    return Response(body, media_type="image/x-exr", headers={"Content-Disposition": disposition})
 
 
 @router.get(
