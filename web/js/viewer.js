@@ -29,6 +29,7 @@ export const UM_PER_PX_CHOICES = [0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 
 const MIN_SEMI_AXIS_SCREEN_PX = 1.5; // thinner ellipses are drawn this wide (said in the legend)
 const ELLIPSE_SCALE_KEY = "hgrender.ellipseUmPerPx";
 const SCALE_BAR_TARGET_PX = 100;
+const CHANNEL_TEXT_COLOURS = ["#ff9a9a", "#9aff9a", "#9ab8ff"]; // R, G, B values on the pixels (as tev)
 
 export class ImageViewer {
   constructor(root, api, { onError }) {
@@ -154,7 +155,7 @@ export class ImageViewer {
   }
 
   exposureEv() {
-    return Number(this.controls.evValue.value);
+    return this.ev ?? 0;
   }
 
   /**
@@ -164,11 +165,14 @@ export class ImageViewer {
   setExposure(ev) {
     const c = this.controls;
     const value = Math.min(Math.max(Number.isFinite(ev) ? ev : 0, -64), 64);
-    c.evValue.value = value.toFixed(1);
+    this.ev = value; // exact (the automatic exposure is not rounded); the box shows 2 decimals
+    c.evValue.value = value.toFixed(2);
     const [lo, hi] = [Number(c.ev.min), Number(c.ev.max)];
     c.ev.value = String(Math.min(Math.max(value, lo), hi));
     const outside = value < lo || value > hi;
-    c.evNote.textContent = outside ? `slider ends at ${value < lo ? lo : hi} EV; exposure ${value.toFixed(1)} EV from the box` : `auto ${this.autoEv.toFixed(1)} EV`;
+    c.evNote.textContent = outside
+      ? `clamped: the slider ends at ${value < lo ? lo : hi} EV; the exposure is ${value.toFixed(2)} EV (box)`
+      : `auto ${this.autoEv.toFixed(2)} EV`;
     c.evNote.classList.toggle("warning", outside);
     c.ev.setAttribute("aria-valuetext", `${value.toFixed(1)} EV`);
   }
@@ -436,6 +440,7 @@ export class ImageViewer {
     }
     this.canvas.getContext("2d").putImageData(image, 0, 0);
     this.canvas.dataset.mode = mode;
+    this.canvas.dataset.ev = String(ev);
     this.canvas.setAttribute("aria-label", `rendered image: ${this.controls.mode.selectedOptions[0]?.textContent ?? mode}`);
     this.drawPixelValues();
     this.canvas.dataset.drawn = String((Number(this.canvas.dataset.drawn) || 0) + 1);
@@ -522,6 +527,7 @@ export class ImageViewer {
         const lines = layer.channels === 3 ? this.valueText(x, y, false).split(" ") : [this.valueText(x, y, false)];
         lines.forEach((text, k) => {
           const ty = cy + (k - (lines.length - 1) / 2) * Math.min(14, zoom / 4);
+          ctx.fillStyle = lines.length === 3 ? CHANNEL_TEXT_COLOURS[k] : "#fff";
           ctx.strokeText(text, cx, ty);
           ctx.fillText(text, cx, ty);
         });
