@@ -338,7 +338,10 @@ async def compare_jobs(
     openapi_extra={
         "requestBody": {
             "required": True,
-            "content": {"image/x-exr": {"schema": {"type": "string", "format": "binary"}}},
+            "content": {
+                media_type: {"schema": {"type": "string", "format": "binary"}}
+                for media_type in ("application/octet-stream", "image/x-exr")
+            },
         }
     },
 )
