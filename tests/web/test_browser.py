@@ -325,6 +325,13 @@ def test_compare_view_shows_delta_e(
     assert "ΔE₀₀" in page.inner_text(".compare-stats")
     diff = np.frombuffer(response.content, dtype="<f4").reshape(SIZE_PX, SIZE_PX)
     assert np.abs(canvas_rgb(page, ".compare-diff") - viridis8(diff / 10.0)).max() <= 1
+    # Hover readout: both images' values and the map's at the pixel under the pointer.
+    stage = page.locator(".compare-stage").bounding_box()
+    scale = stage["width"] / SIZE_PX
+    page.mouse.move(stage["x"] + 6.5 * scale, stage["y"] + 9.5 * scale)
+    readout = page.inner_text(".compare-readout")
+    assert readout.startswith("(6, 9) linear R G B a: ")
+    assert float(readout.rsplit("de2000 ", 1)[1]) == pytest.approx(float(diff[9, 6]), rel=5e-3)  # 3 digits
     screenshot(page, "compare_de2000")
     page.select_option(".compare-mode", "flip")
     page.wait_for_function("() => Number(document.querySelector('.compare').dataset.ready) >= 3")

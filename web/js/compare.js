@@ -62,6 +62,7 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
       <div class="compare-divider" aria-hidden="true"></div>
       <canvas class="compare-diff" role="img" aria-label="difference map" hidden></canvas>
     </div>
+    <output class="compare-readout small" aria-live="off"></output>
     <div class="compare-legend"></div>
     <p class="compare-stats" aria-live="polite"></p>`;
   element.append(root);
@@ -89,6 +90,19 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
   $(".compare-stage").style.aspectRatio = `${left.width} / ${left.height}`;
 
   const controller = { root, stats: null, update, destroy: () => root.remove() };
+  let lastDiff = null;
+
+  // Hover readout: both images' linear RGB at the pixel under the pointer, and the difference map's value.
+  $(".compare-stage").addEventListener("pointermove", (event) => {
+    const rect = $(".compare-stage").getBoundingClientRect();
+    const x = Math.floor(((event.clientX - rect.left) / rect.width) * left.width);
+    const y = Math.floor(((event.clientY - rect.top) / rect.height) * left.height);
+    if (x < 0 || y < 0 || x >= left.width || y >= left.height) return;
+    const i = y * left.width + x;
+    const rgb = (floats) => [0, 1, 2].map((c) => formatValue(floats.data[3 * i + c])).join(" ");
+    const diffText = options.mode !== "split" && lastDiff ? `; ${options.mode} ${formatValue(lastDiff[i])}` : "";
+    $(".compare-readout").textContent = `(${x}, ${y}) linear R G B a: ${rgb(left)}, b: ${rgb(right)}${diffText}`;
+  });
 
   function drawImage(canvas, floats) {
     const image = new ImageData(floats.width, floats.height);
@@ -115,6 +129,7 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
       image.data.set([r, g, b, 255], 4 * i);
     }
     $(".compare-diff").getContext("2d").putImageData(image, 0, 0);
+    lastDiff = diff.data;
     const [unit, title] = {
       abs: ["W·m⁻²·sr⁻¹·nm⁻¹", "|b − a| (mean of R, G, B)"],
       rel: ["1", "|b − a| / |a|"],
