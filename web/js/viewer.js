@@ -39,6 +39,7 @@ export class ImageViewer {
     const $ = (selector) => root.querySelector(selector);
     this.canvas = $("#image-canvas");
     this.overlay = $("#ellipse-overlay");
+    this.halo = $("#ellipse-halo");
     this.markers = $("#marker-overlay");
     this.valueCanvas = $("#value-canvas");
     this.viewport = $("#viewport");
@@ -276,6 +277,9 @@ export class ImageViewer {
     this.stage.style.transform = `translate(${panX}px, ${panY}px) scale(${zoom})`;
     // Strokes are in image pixels (the overlays are scaled with the image): keep them 1.5 screen pixels.
     this.overlay.style.strokeWidth = String(1.5 / zoom);
+    // White outlines over a halo (a black copy of each ellipse under it, 1 screen px wider on each side)
+    // stay visible on white, black and false-colour images alike.
+    this.halo.style.strokeWidth = String(3.5 / zoom);
     this.markers.style.strokeWidth = String(2 / zoom);
     this.root.querySelector("#zoom-label").textContent = `${Math.round(zoom * 100)}%`;
     if (this.ellipses?.length) this.drawEllipses(); // the thinnest axes keep a visible screen width
@@ -294,7 +298,7 @@ export class ImageViewer {
     this.canvas.width = 1;
     this.canvas.height = 1;
     this.canvas.getContext("2d").clearRect(0, 0, 1, 1);
-    for (const node of [this.overlay, this.markers, this.root.querySelector("#legend"), this.root.querySelector("#ellipse-legend")]) node.replaceChildren();
+    for (const node of [this.overlay, this.halo, this.markers, this.root.querySelector("#legend"), this.root.querySelector("#ellipse-legend")]) node.replaceChildren();
     this.valueCanvas.getContext("2d").clearRect(0, 0, this.valueCanvas.width, this.valueCanvas.height);
     this.root.querySelector("#scale-bar").hidden = true;
     this.root.querySelector("#viewer-title").textContent = title;
@@ -325,7 +329,7 @@ export class ImageViewer {
     this.canvas.height = height;
     this.stage.style.width = `${width}px`;
     this.stage.style.height = `${height}px`;
-    for (const svg of [this.overlay, this.markers]) {
+    for (const svg of [this.overlay, this.halo, this.markers]) {
       svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
       svg.setAttribute("width", width);
       svg.setAttribute("height", height);
@@ -582,6 +586,7 @@ export class ImageViewer {
   /** Ellipses: semi-axes ℓ₁(λ), ℓ₂(λ) in µm at the slider's λ, drawn at `umPerPx`; rotated by −angle. */
   drawEllipses() {
     this.overlay.replaceChildren();
+    this.halo.replaceChildren();
     const legend = this.root.querySelector("#ellipse-legend");
     legend.replaceChildren();
     const grid = this.ellipses || [];
@@ -622,6 +627,9 @@ export class ImageViewer {
         angle: e.angle,
         areaUm2: e.area_um2 * lambdaFactor * lambdaFactor,
       });
+      const halo = shape.cloneNode();
+      for (const attribute of ["fill", "stroke"]) halo.removeAttribute(attribute);
+      this.halo.append(halo);
       const title = document.createElementNS(ns, "title");
       title.textContent = ellipseText(shape.dataset, nm);
       shape.append(title);
