@@ -15,7 +15,9 @@ let compareView = null;
 
 function showError(error) {
   const box = document.getElementById("error");
-  box.textContent = error ? String(error.message || error) : "";
+  const noToken = !loadToken() || error?.status === 401;
+  const hint = noToken ? " — paste an API token above: `hgrender serve` wrote one to <data dir>/admin.token (see the Jobs page)" : "";
+  box.textContent = error ? String(error.message || error) + hint : "";
   box.hidden = !error;
 }
 
