@@ -31,7 +31,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from hgrender.imaging import REC709_LUMINANCE, display_rgb8
+from hgrender.imaging import REC709_LUMINANCE, auto_exposure_ev, display_rgb8
 from service.image_metrics import (
     PERCEPTUAL_METRICS,
     XYZ_TO_LINEAR_SRGB,
@@ -137,8 +137,11 @@ class DecodedImage:
         """The automatic exposure (``service.image_metrics.metric_exposure_ev``; computed once): the
         viewer's and the compare view's default, and what a regression run uses for its colour metrics."""
         if self._exposure_ev is None:
+            # One band has no colour (bands → XYZ needs two): then the RGB luminance rule, the same EV.
             self._exposure_ev = (
-                metric_exposure_ev(self.bands, np.array(self.wavelengths_nm)) if self.band_names else 0.0
+                metric_exposure_ev(self.bands, np.array(self.wavelengths_nm))
+                if len(self.band_names) >= 2
+                else auto_exposure_ev(self.rgb)
             )
         return self._exposure_ev
 
@@ -213,10 +216,11 @@ def decode_uploaded_exr(data: bytes) -> DecodedImage:
             image = decode_exr(path)
         except OSError as error:
             raise ValueError(f"file: cannot decode the EXR: {error}") from None
-    if not image.band_names:
+    if len(image.band_names) < 2:
         names = ", ".join(sorted(image.channels)[:8])
         raise ValueError(
-            f"file: no spectral channels S0.<wavelength>nm (e.g. S0.550,000000nm); the file has {names}"
+            "file: needs at least 2 spectral channels S0.<wavelength>nm (e.g. S0.550,000000nm); "
+            f"the file has {names}"
         )
     if not all(c in image.channels for c in "RGB"):
         xyz = radiance_xyz(image.bands, np.array(image.wavelengths_nm))
@@ -512,6 +516,8 @@ def difference_map(
     elif mode in PERCEPTUAL_METRICS:
         if reference.wavelengths_nm != sample.wavelengths_nm:
             raise ValueError("b: its bands differ from a's; compare needs the same spectral layout")
+        if len(reference.band_names) < 2:
+            raise ValueError(f"mode: {mode} needs at least 2 spectral bands (colour); a has one")
         ev = reference.exposure_ev() if exposure_ev is None else exposure_ev
         bands = np.array(reference.wavelengths_nm)
         result = perceptual_map(mode, reference.bands.astype(np.float64), sample.bands, bands, ev)

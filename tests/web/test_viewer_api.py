@@ -204,7 +204,7 @@ def test_uploaded_exr_is_viewable_and_validated(served: Served, cylinder_job: Re
     out.write_image(np.full((4, 4, 3), 0.5, dtype=np.float32))
     out.close()
     response = httpx.post(served.base_url + "/v1/images", content=grey.read_bytes(), headers=headers)
-    assert response.status_code == 422 and "no spectral channels" in response.json()["detail"]
+    assert response.status_code == 422 and "at least 2 spectral channels" in response.json()["detail"]
     huge = b"\x76\x2f\x31\x01" + b"\0" * (64 * 1024 * 1024)
     response = httpx.post(served.base_url + "/v1/images", content=huge, headers=headers, timeout=60)
     assert response.status_code == 413
@@ -316,3 +316,15 @@ def test_diagnostics_exr_holds_the_coherence_channels(
     assert set(channels) == expected and "coherence.l1_um" in expected
     for name in expected:
         np.testing.assert_array_equal(channels[name], cylinder_job.exr.channels[name])
+
+
+def test_one_band_image_has_an_exposure_and_refuses_colour_metrics() -> None:
+    """A scene may render one band: no colour, so the RGB luminance rule gives the exposure and ΔE₀₀/ꟻLIP
+    are refused by name instead of failing the catalogue."""
+    from service.viewer_data import _decoded, difference_map
+
+    rgb = np.full((4, 4), 0.25, dtype=np.float32)
+    image = _decoded(4, 4, {"S0.550,000000nm": rgb, "R": rgb, "G": rgb, "B": rgb})
+    assert image.exposure_ev() == pytest.approx(2.0)  # luminance 0.25 → ×4 is white
+    with pytest.raises(ValueError, match=r"^mode: de2000 needs at least 2 spectral bands"):
+        difference_map(image, image, "de2000")

@@ -333,7 +333,7 @@ async def compare_jobs(
     responses={
         **_ERRORS,
         413: {"model": Problem, "description": "Larger than HGRENDER_MAX_REQUEST_BYTES."},
-        422: {"model": Problem, "description": "Not an OpenEXR file, or no S0.<λ>nm channels."},
+        422: {"model": Problem, "description": "Not an OpenEXR file, or fewer than 2 S0.<λ>nm channels."},
     },
     openapi_extra={
         "requestBody": {
@@ -346,10 +346,10 @@ async def compare_jobs(
     },
 )
 async def upload_image(request: Request, principal: Reader) -> UploadedImage:
-    """The body is the EXR file itself. It is decoded with OpenImageIO, checked to carry spectral
-    `S0.<λ>nm` channels, and kept in the service's memory only (the last 4 uploads; nothing is stored):
-    the returned id works with every viewer endpoint for its uploader. Size bounded by the request
-    limit (413)."""
+    """The body is the EXR file itself. It is decoded with OpenImageIO, checked to carry at least two
+    spectral `S0.<λ>nm` channels, and kept in the service's memory only (the last 4 uploads; nothing is
+    stored): the returned id works with every viewer endpoint for its uploader. Size bounded by the
+    request limit (413)."""
     data = await request.body()
     image = await run_in_threadpool(decode_uploaded_exr, data)
     uploads: UploadedImages = request.app.state.viewer_uploads
