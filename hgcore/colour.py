@@ -85,6 +85,12 @@ def bands_to_xyz(band_values: np.ndarray, band_centers_nm: np.ndarray) -> np.nda
     return np.asarray(band_values, dtype=float) @ band_xyz_weights(band_centers_nm)
 
 
+def radiance_xyz(band_values: np.ndarray, band_centers_nm: np.ndarray) -> np.ndarray:
+    """CIE XYZ of (..., B) band radiances on the scale of the renderer's linear sRGB: divided by ∫ȳ dλ, so a
+    unit equal-energy spectrum has Y = 1 and Y is the luminance of an EXR's R, G, B."""
+    return bands_to_xyz(band_values, band_centers_nm) / y_bar_integral_nm()
+
+
 def xyz_to_lab(xyz: np.ndarray, white_xyz: np.ndarray) -> np.ndarray:
     """CIELAB L*, a*, b* of ``xyz`` (..., 3) relative to the white ``white_xyz`` (3,), same units."""
     white = np.asarray(white_xyz, dtype=float)

@@ -107,6 +107,8 @@ class JobService(JobRecords):
             "status": JobStatus.QUEUED.value,
             "priority": priority,
             "spp": str(spp),
+            "width": str(scene["film"].get("width", "")),
+            "height": str(scene["film"].get("height", "")),
             "seed": str(base_seed),
             "chunks": str(chunk_count),
             "created_at": repr(now),

@@ -22,14 +22,16 @@ import io
 import math
 import tempfile
 import threading
+import uuid
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
-from hgcore.artifacts.exr import read_exr
+from hgcore.artifacts.exr import ArtifactFormatError, read_exr, write_exr
 from hgcore.artifacts.images import image_channels, images_from_sums
 from hgcore.artifacts.keys import artifact_key, chunks_prefix
 from hgcore.artifacts.layout import (
@@ -45,9 +47,10 @@ from hgcore.artifacts.layout import (
     spectral_channel_wavelength_nm,
 )
 from hgcore.artifacts.pixel_sums import PixelSums, read_partial
-from hgcore.colour import D65_WHITE_XYZ, LINEAR_SRGB_TO_XYZ, ciede2000, xyz_to_lab
-from hgcore.imaging import REC709_LUMINANCE, display_rgb8, tone_map
+from hgcore.colour import XYZ_TO_LINEAR_SRGB, radiance_xyz
+from hgcore.imaging import REC709_LUMINANCE, auto_exposure_ev, display_rgb8
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
+from service.image_metrics import PERCEPTUAL_METRICS, metric_exposure_ev, perceptual_map
 
 RGB_LAYER = "rgb"
 RADIANCE_UNIT = "W·m⁻²·sr⁻¹·nm⁻¹"
@@ -64,8 +67,7 @@ _UNITS = {
     "coherence.weight": "1",
     "depth": "m",
 }
-CompareMode = Literal["abs", "rel", "de2000"]
-COMPARE_MODES: tuple[str, ...] = ("abs", "rel", "de2000")
+COMPARE_MODES: tuple[str, ...] = ("abs", "rel", *PERCEPTUAL_METRICS)
 
 
 def layer_kind(name: str) -> str:
@@ -112,6 +114,7 @@ class DecodedImage:
     wavelengths_nm: list[float] = field(default_factory=list)
     partial: bool = False  # merged from the chunks finished so far (the job is still running)
     _layers: list[LayerInfo] | None = None
+    _exposure_ev: float | None = None
 
     @property
     def rgb(self) -> np.ndarray:
@@ -125,6 +128,23 @@ class DecodedImage:
         if weight is None:
             return np.zeros((self.height, self.width), dtype=bool)
         return weight > 0
+
+    @property
+    def bands(self) -> np.ndarray:
+        """Band radiances, shape (H, W, B), by wavelength."""
+        return np.stack([self.channels[name] for name in self.band_names], axis=-1)
+
+    def exposure_ev(self) -> float:
+        """The automatic exposure (``service.image_metrics.metric_exposure_ev``; computed once): the
+        viewer's and the compare view's default, and what a regression run uses for its colour metrics."""
+        if self._exposure_ev is None:
+            # One band has no colour (bands → XYZ needs two): then the RGB luminance rule, the same EV.
+            self._exposure_ev = (
+                metric_exposure_ev(self.bands, np.array(self.wavelengths_nm))
+                if len(self.band_names) >= 2
+                else auto_exposure_ev(self.rgb)
+            )
+        return self._exposure_ev
 
     def layer(self, name: str) -> np.ndarray:
         """(H, W) float32 for a channel name, (H, W, 3) for ``rgb``; ValueError names unknown layers."""
@@ -165,6 +185,66 @@ def decode_exr(path: Path) -> DecodedImage:
     """Read every channel of an EXR (first subimage) as float32 (H, W) arrays."""
     image = read_exr(path)
     return _decoded(image.width, image.height, image.channels)
+
+
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+"""The first four bytes of every OpenEXR file."""
+
+
+def decode_uploaded_exr(data: bytes) -> DecodedImage:
+    """A spectral EXR sent by the browser (drag and drop), validated: an OpenEXR file with at least one
+    ``S0.<λ>nm`` band; linear sRGB ``R``, ``G``, ``B`` are computed from the bands when absent. ValueError
+    ("file: ...") otherwise, which the API answers with 422."""
+    if not data.startswith(EXR_MAGIC):
+        raise ValueError("file: not an OpenEXR file (its first bytes are not the EXR magic number)")
+    with tempfile.TemporaryDirectory(prefix="hgrender-upload-") as directory:
+        path = Path(directory) / "upload.exr"
+        path.write_bytes(data)
+        try:
+            image = decode_exr(path)
+        except ArtifactFormatError as error:
+            raise ValueError(f"file: cannot decode the EXR: {error}") from None
+    if len(image.band_names) < 2:
+        names = ", ".join(sorted(image.channels)[:8])
+        raise ValueError(
+            "file: needs at least 2 spectral channels S0.<wavelength>nm (e.g. S0.550,000000nm); "
+            f"the file has {names}"
+        )
+    if not all(c in image.channels for c in "RGB"):
+        xyz = radiance_xyz(image.bands, np.array(image.wavelengths_nm))
+        rgb = (xyz @ XYZ_TO_LINEAR_SRGB.T).astype(np.float32)
+        image.channels.update({c: np.ascontiguousarray(rgb[..., i]) for i, c in enumerate("RGB")})
+    return image
+
+
+class UploadedImages:
+    """Images dropped into the viewer from the user's disk: decoded and kept in memory only (never
+    written to the artifact store), at most ``max_images`` (least recently used dropped), each visible to
+    its uploader only. Ids share the 32-hex form of job ids, so every viewer endpoint serves them."""
+
+    def __init__(self, max_images: int = 4) -> None:
+        if max_images < 1:
+            raise ValueError(f"max_images: must be at least 1, got {max_images}")
+        self.max_images = max_images
+        self._images: OrderedDict[str, tuple[str, DecodedImage]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def add(self, owner: str, image: DecodedImage) -> str:
+        image_id = uuid.uuid4().hex
+        with self._lock:
+            self._images[image_id] = (owner, image)
+            while len(self._images) > self.max_images:
+                self._images.popitem(last=False)
+        return image_id
+
+    def get(self, image_id: str, can_see: Callable[[str], bool]) -> DecodedImage | None:
+        """The image if it exists and ``can_see(owner)``; None otherwise (then it is not an upload)."""
+        with self._lock:
+            entry = self._images.get(image_id)
+            if entry is None or not can_see(entry[0]):
+                return None
+            self._images.move_to_end(image_id)
+            return entry[1]
 
 
 def _decoded(width: int, height: int, channels: dict[str, np.ndarray], partial: bool = False) -> DecodedImage:
@@ -344,6 +424,18 @@ def display_png(image: DecodedImage, exposure_ev: float, operator: str) -> bytes
     return buffer.getvalue()
 
 
+def diagnostics_exr(image: DecodedImage) -> bytes:
+    """The ``coherence.*`` channels (ℓ₁, ℓ₂ in µm at 550 nm, angle, anisotropy, area, r, M, weight) as a
+    float32 OpenEXR file, channel names as in ``image.exr``; ValueError when the image has none."""
+    names = sorted(n for n in image.channels if n.startswith(COHERENCE_PREFIX))
+    if not names:
+        raise ValueError("name: this image has no coherence diagnostics")
+    with tempfile.TemporaryDirectory(prefix="hgrender-diagnostics-") as directory:
+        path = Path(directory) / "diagnostics.exr"
+        write_exr(path, [(name, image.channels[name]) for name in names], {})
+        return path.read_bytes()
+
+
 def ellipse_grid(image: DecodedImage, spacing_px: int) -> list[dict[str, float]]:
     """Coherence ellipses on a grid: one per ``spacing_px`` cell that has diagnostics at its centre pixel
     (x = y = spacing/2 + i·spacing, rounded down), with that pixel's ℓ₁, ℓ₂ (µm), angle (rad) and area
@@ -368,55 +460,39 @@ def ellipse_grid(image: DecodedImage, spacing_px: int) -> list[dict[str, float]]
 # ---- comparing two images --------------------------------------------------------------------------------
 
 
-def _display_lab(linear_rgb: np.ndarray, exposure_ev: float, operator: str) -> np.ndarray:
-    """CIELAB (D65) of what the viewer shows: exposed, tone-mapped display-referred linear sRGB."""
-    displayed = tone_map(linear_rgb * 2.0**exposure_ev, operator)
-    return xyz_to_lab(displayed @ LINEAR_SRGB_TO_XYZ.T, D65_WHITE_XYZ)
-
-
 def difference_map(
     reference: DecodedImage,
     sample: DecodedImage,
     mode: str,
-    exposure_ev: float = 0.0,
-    operator: str = "clamp",
+    exposure_ev: float | None = None,
 ) -> np.ndarray:
     """Per-pixel difference of two same-sized images, float32 (H, W).
 
     * ``abs``: mean over R, G, B of |sample − reference| (linear sRGB radiance units);
     * ``rel``: mean over R, G, B of |sample − reference| / max(|reference|, ε), ε = 1 % of the
       reference's mean luminance (keeps black pixels from dividing by zero);
-    * ``de2000``: CIEDE2000 ΔE₀₀ of both images as displayed with the same EV and tone map.
+    * ``de2000``, ``flip``: CIEDE2000 ΔE₀₀ or ꟻLIP of the two spectral images at ``exposure_ev``
+      (default: the reference's automatic exposure), by ``service.image_metrics`` as regression runs do.
     """
     if (reference.width, reference.height) != (sample.width, sample.height):
         raise ValueError(
             f"b: image is {sample.width}x{sample.height}, a is {reference.width}x{reference.height};"
             " compare needs equal sizes"
         )
-    if not math.isfinite(exposure_ev):
-        raise ValueError(f"ev: must be finite, got {exposure_ev}")
     rgb_a, rgb_b = reference.rgb.astype(np.float64), sample.rgb.astype(np.float64)
     if mode == "abs":
         result = np.mean(np.abs(rgb_b - rgb_a), axis=-1)
     elif mode == "rel":
         floor = max(0.01 * float(np.mean(rgb_a @ REC709_LUMINANCE)), np.finfo(np.float32).tiny)
         result = np.mean(np.abs(rgb_b - rgb_a) / np.maximum(np.abs(rgb_a), floor), axis=-1)
-    elif mode == "de2000":
-        result = ciede2000(
-            _display_lab(rgb_a, exposure_ev, operator), _display_lab(rgb_b, exposure_ev, operator)
-        )
+    elif mode in PERCEPTUAL_METRICS:
+        if reference.wavelengths_nm != sample.wavelengths_nm:
+            raise ValueError("b: its bands differ from a's; compare needs the same spectral layout")
+        if len(reference.band_names) < 2:
+            raise ValueError(f"mode: {mode} needs at least 2 spectral bands (colour); a has one")
+        ev = reference.exposure_ev() if exposure_ev is None else exposure_ev
+        bands = np.array(reference.wavelengths_nm)
+        result = perceptual_map(mode, reference.bands.astype(np.float64), sample.bands, bands, ev)
     else:
         raise ValueError(f"mode: must be one of {', '.join(COMPARE_MODES)}, got {mode!r}")
     return result.astype(np.float32)
-
-
-def difference_statistics(values: np.ndarray) -> dict[str, float]:
-    """Mean, 95th percentile and maximum of a difference map."""
-    finite = values[np.isfinite(values)]
-    if finite.size == 0:
-        return {"mean": math.nan, "p95": math.nan, "max": math.nan}
-    return {
-        "mean": float(finite.mean()),
-        "p95": float(np.percentile(finite, 95.0)),
-        "max": float(finite.max()),
-    }

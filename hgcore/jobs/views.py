@@ -47,6 +47,8 @@ class JobView(BaseModel):
     eta_s: float | None = Field(None, description="Estimated seconds to completion while running.")
     priority: Priority
     spp: int
+    width: int | None = Field(None, description="Image width (px) of the scene's film.")
+    height: int | None = Field(None, description="Image height (px) of the scene's film.")
     seed: int
     chunks_total: int
     chunks_done: int
@@ -116,6 +118,8 @@ def build_view(record: dict[str, str], chunk_fields: dict[str, str], now: float 
         eta_s=eta_s,
         priority=record["priority"],  # type: ignore[arg-type]
         spp=int(record["spp"]),
+        width=int(record["width"]) if record.get("width") else None,
+        height=int(record["height"]) if record.get("height") else None,
         seed=int(record["seed"]),
         chunks_total=chunk_count,
         chunks_done=chunks_done,

@@ -1,4 +1,4 @@
-"""Noise-aware comparison of a render with its baseline: per-band relative RMSE, ΔE₀₀, coherence drift.
+"""Noise-aware comparison of a render with its baseline: per-band relative RMSE, ΔE₀₀, ꟻLIP, coherence drift.
 
 Both renders are Monte Carlo estimates, so each pixel p of band b is a mean with variance v_p (from
 ``variance.exr``). A metric fails only if its effect size exceeds the threshold AND a significance test says
@@ -19,12 +19,15 @@ Gaussian statistics):
   relative RMSE √max(0, mean_p e_p) / rms_p(a) (the raw √mean_p (c − a)² / rms_p(a) is reported too). A
   band fails if |relative mean change| > ``max_rel_mean_change`` or its corrected RMSE > ``max_rel_rmse``,
   and its significance max(|z_b|, |z_pixel|, z_excess) > z_crit.
-* Colour. Band spectra → CIE 1931 XYZ → CIELAB with the D65 white scaled to the baseline's 99th-percentile
-  luminance (one white for both images); per-pixel ΔE₀₀ mean, p95, max. Noise alone gives a large ΔE₀₀ at
-  few spp, so its level is estimated by a parametric bootstrap: ΔE₀₀ between a and a + ε √(v_a + v_c)
-  (ε ~ N(0, 1) per pixel and band, clipped at 0, four draws, fixed seed) gives ``p95_noise``; the excess
-  p95 − p95_noise fails if > ``max_delta_e00_p95`` and some band differs significantly (colour cannot
-  change unless the spectrum does).
+* Colour. Both images at one exposure, the EV that maps the baseline's 99th-percentile luminance to white
+  (``exposure_ev``, stored with the metrics; the compare view opens at it): per-pixel CIEDE2000 ΔE₀₀ of
+  band spectra → CIE 1931 XYZ → CIELAB, and per-pixel ꟻLIP of the displayed images
+  (``service.image_metrics``, the same code as the compare view): mean, p95, max. Noise alone gives large
+  values at few spp, so their level is estimated by a parametric bootstrap: the metric between a and
+  a + ε √(v_a + v_c) (ε ~ N(0, 1) per pixel and band, clipped at 0, four draws, fixed seed) gives
+  ``p95_noise``/``mean_noise``; ΔE₀₀'s p95 − p95_noise fails if > ``max_delta_e00_p95`` and ꟻLIP's
+  mean − mean_noise if > ``max_flip_mean``, each only when some band differs significantly (colour
+  cannot change unless the spectrum does).
 * Coherence. Over pixels with weight > 0 in both, the median relative change (c − a)/a of ℓ₁, ℓ₂ and
   anisotropy; significance by the sign test: under no change P(c > a) = ½ exactly (the two renders are
   exchangeable), so z = (n₊ − n₋)/√(n₊ + n₋). Fails if |median| > ``max_coherence_drift`` and |z| > z_crit.
@@ -37,14 +40,12 @@ from typing import Any
 
 import numpy as np
 
-from hgcore.colour import D65_WHITE_XYZ, bands_to_xyz, ciede2000, xyz_to_lab
+from service.image_metrics import map_statistics, metric_exposure_ev, perceptual_map
 from service.regression.images import COHERENCE_METRIC_CHANNELS, RenderOutputs
 from service.regression.models import Thresholds
 
 NOISE_DRAWS = 4
-"""Bootstrap draws of the ΔE₀₀ noise level (4 × the pixel count samples its 95th percentile)."""
-WHITE_PERCENTILE = 99.0
-"""Luminance percentile of the baseline that is the CIELAB reference white (robust against fireflies)."""
+"""Bootstrap draws of the ΔE₀₀ and ꟻLIP noise levels (4 × the pixel count samples their 95th percentile)."""
 
 
 @dataclass
@@ -103,37 +104,40 @@ def band_metrics(baseline: RenderOutputs, current: RenderOutputs) -> list[dict[s
     return results
 
 
-def delta_e00_metrics(baseline: RenderOutputs, current: RenderOutputs) -> dict[str, float]:
-    """Per-pixel ΔE₀₀ statistics of the two spectral images (one reference white, from the baseline)."""
+def perceptual_metrics(
+    metric: str, baseline: RenderOutputs, current: RenderOutputs, exposure_ev: float
+) -> dict[str, float]:
+    """Per-pixel ``de2000`` (ΔE₀₀) or ``flip`` (ꟻLIP) statistics of the two spectral images at
+    ``exposure_ev`` (``service.image_metrics``, the compare view's code), with the noise level.
+
+    Noise alone gives large values at few spp, so the level is estimated by a parametric bootstrap: the
+    metric between a and a + ε √(v_a + v_c) (ε ~ N(0, 1) per pixel and band, clipped at 0, four draws,
+    fixed seed) gives ``mean_noise`` and ``p95_noise``; the excesses are what noise does not explain."""
     centers_nm = baseline.band_centers_nm
-    xyz_a = bands_to_xyz(baseline.bands, centers_nm)
-    white_y = float(np.percentile(xyz_a[..., 1], WHITE_PERCENTILE))
-    white_xyz = D65_WHITE_XYZ * (white_y if white_y > 0.0 else 1.0)
-    lab_a = xyz_to_lab(xyz_a, white_xyz)
-    delta_e = ciede2000(lab_a, xyz_to_lab(bands_to_xyz(current.bands, centers_nm), white_xyz))
-    # Parametric bootstrap of the noise level: the baseline plus noise of both renders' variance.
+    values = perceptual_map(metric, baseline.bands, current.bands, centers_nm, exposure_ev)
     rng = np.random.default_rng(0)
     sigma = np.sqrt(baseline.band_variance + current.band_variance)
-    noise_delta_e = [
-        ciede2000(
-            lab_a,
-            xyz_to_lab(
-                bands_to_xyz(
-                    np.maximum(baseline.bands + sigma * rng.standard_normal(sigma.shape), 0.0), centers_nm
-                ),
-                white_xyz,
-            ),
-        )
-        for _ in range(NOISE_DRAWS)
-    ]
-    p95 = float(np.percentile(delta_e, 95.0))
-    p95_noise = float(np.percentile(np.concatenate([d.ravel() for d in noise_delta_e]), 95.0))
+    noise = np.concatenate(
+        [
+            perceptual_map(
+                metric,
+                baseline.bands,
+                np.maximum(baseline.bands + sigma * rng.standard_normal(sigma.shape), 0.0),
+                centers_nm,
+                exposure_ev,
+            ).ravel()
+            for _ in range(NOISE_DRAWS)
+        ]
+    )
+    stats = map_statistics(values)
+    noise_stats = map_statistics(noise)
     return {
-        "mean": float(np.mean(delta_e)),
-        "p95": p95,
-        "max": float(np.max(delta_e)),
-        "p95_noise": p95_noise,
-        "p95_excess": max(0.0, p95 - p95_noise),
+        **stats,
+        "exposure_ev": exposure_ev,
+        "mean_noise": noise_stats["mean"],
+        "p95_noise": noise_stats["p95"],
+        "mean_excess": max(0.0, stats["mean"] - noise_stats["mean"]),
+        "p95_excess": max(0.0, stats["p95"] - noise_stats["p95"]),
     }
 
 
@@ -177,7 +181,9 @@ def compare_renders(
         )
     z_crit = thresholds.z_critical
     bands = band_metrics(baseline, current)
-    colour = delta_e00_metrics(baseline, current)
+    exposure_ev = metric_exposure_ev(baseline.bands, baseline.band_centers_nm)
+    colour = perceptual_metrics("de2000", baseline, current, exposure_ev)
+    flip = perceptual_metrics("flip", baseline, current, exposure_ev)
     coherence = coherence_metrics(baseline, current)
     reasons = []
     significant_bands = [b for b in bands if band_significance(b) > z_crit]
@@ -199,6 +205,11 @@ def compare_renders(
             f"{scene}: delta_e00_p95 is {colour['p95']:.3f}, {colour['p95_excess']:.3f} above its noise "
             f"level > {thresholds.max_delta_e00_p95} ({len(significant_bands)} bands differ significantly)"
         )
+    if significant_bands and flip["mean_excess"] > thresholds.max_flip_mean:
+        reasons.append(
+            f"{scene}: flip_mean is {flip['mean']:.4f}, {flip['mean_excess']:.4f} above its noise level "
+            f"> {thresholds.max_flip_mean} ({len(significant_bands)} bands differ significantly)"
+        )
     for name, drift in coherence.items():
         if abs(drift["median_rel_change"]) > thresholds.max_coherence_drift and abs(drift["z_sign"]) > z_crit:
             reasons.append(
@@ -209,7 +220,9 @@ def compare_renders(
         "bands": bands,
         "rel_rmse_max": max(b["rel_rmse_corrected"] for b in bands),
         "z_max": max(band_significance(b) for b in bands),
+        "exposure_ev": exposure_ev,
         "delta_e00": colour,
+        "flip": flip,
         "coherence": coherence,
     }
     return Comparison(scene, metrics, reasons)

@@ -35,6 +35,9 @@ class Thresholds(BaseModel):
     max_delta_e00_p95: float = Field(
         2.0, ge=0, description="Largest 95th percentile of per-pixel ΔE₀₀ above its noise level."
     )
+    max_flip_mean: float = Field(
+        0.05, ge=0, description="Largest mean per-pixel ꟻLIP error (0..1) above its noise level."
+    )
     max_coherence_drift: float = Field(
         0.05, ge=0, description="Largest |median relative change| of ℓ₁, ℓ₂ or anisotropy."
     )
@@ -211,7 +214,8 @@ class RunCreate(BaseModel):
 class RunList(BaseModel):
     items: list[RunView]
     series: dict[str, list[dict[str, Any]]] = Field(
-        description="Per scene, oldest first: run id, time, verdict, ΔE₀₀ p95, worst band rel. RMSE."
+        description="Per scene, oldest first: run id, time, verdict, the quantities the verdict tests "
+        "(ΔE₀₀ p95 excess, ꟻLIP mean excess, worst band rel. RMSE) and the raw ΔE₀₀ p95, ꟻLIP mean."
     )
 
 

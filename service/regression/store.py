@@ -189,19 +189,26 @@ class RegressionStore:
 
 
 def run_series(runs: list[RunView]) -> dict[str, list[dict[str, object]]]:
-    """Per-scene history (oldest first) of the runs' headline metrics, for trend plots."""
+    """Per-scene history (oldest first) of the runs' headline metrics, for trend plots: the quantities the
+    verdict compares with thresholds (``*_excess``, ``rel_rmse_max``), the raw ΔE₀₀ p95 and ꟻLIP mean, and
+    the exposure the colour metrics used (the dashboard opens the compare view at it)."""
     series: dict[str, list[dict[str, object]]] = {}
     for run in sorted(runs, key=lambda r: r.created_at):
         for result in run.scenes:
             if result.verdict is None:
                 continue
             delta_e = result.metrics.get("delta_e00", {})
+            flip = result.metrics.get("flip", {})
             series.setdefault(result.scene, []).append(
                 {
                     "run_id": run.id,
                     "at": run.created_at,
                     "verdict": result.verdict,
+                    "exposure_ev": result.metrics.get("exposure_ev"),
                     "delta_e00_p95": delta_e.get("p95"),
+                    "delta_e00_p95_excess": delta_e.get("p95_excess"),
+                    "flip_mean": flip.get("mean"),
+                    "flip_mean_excess": flip.get("mean_excess"),
                     "rel_rmse_max": result.metrics.get("rel_rmse_max"),
                     "job_id": result.job_id,
                     "baseline_job_id": result.baseline_job_id,

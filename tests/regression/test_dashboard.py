@@ -64,6 +64,16 @@ def test_dashboard_shows_schedules_trend_and_compare(live_service: LiveService, 
     assert page.locator("#runs tbody tr").count() == 2
     assert page.locator("#trend circle").count() == 1
     assert page.locator("#trend circle").get_attribute("fill") != "none"
+    # The trend plots what the verdict tests (ΔE₀₀ p95 above its noise level) with its threshold.
+    stored = passing_run["scenes"][0]["metrics"]["delta_e00"]
+    assert float(page.get_attribute("#trend circle", "data-y")) == pytest.approx(stored["p95_excess"])
+    assert page.text_content("#trend .reference-label") == "threshold max_delta_e00_p95 = 2"
+    page.select_option("#trend-metric", "flip_mean_excess")
+    assert page.get_attribute("#trend", "data-metric") == "flip_mean_excess"
+    flip = passing_run["scenes"][0]["metrics"]["flip"]
+    assert float(page.get_attribute("#trend circle", "data-y")) == pytest.approx(flip["mean_excess"])
+    assert "max_flip_mean" in page.text_content("#trend .reference-label")
+    page.select_option("#trend-metric", "delta_e00_p95_excess")
 
     # The failing schedule: a ring on the plot, the reason in the table, and the compare view.
     page.get_by_role("button", name="bigger light").click()
@@ -76,4 +86,16 @@ def test_dashboard_shows_schedules_trend_and_compare(live_service: LiveService, 
     page.locator("#compare section.compare canvas.compare-diff").wait_for()
     caption = page.locator("#compare-caption").inner_text()
     assert baseline_run["scenes"][0]["job_id"] in caption and failing_run["scenes"][0]["job_id"] in caption
+    # The compare view opens at the run's exposure and shows the ΔE₀₀ the run stored (one code path:
+    # issue 14 saw a stored p95 of 57.7 shown as 1.99 at 0 EV).
+    metrics = failing_run["scenes"][0]["metrics"]
+    stats = page.locator("#compare .compare-stats")
+    assert float(stats.get_attribute("data-ev")) == metrics["exposure_ev"]
+    assert float(stats.get_attribute("data-p95")) == pytest.approx(metrics["delta_e00"]["p95"], rel=1e-6)
+    assert float(stats.get_attribute("data-mean")) == pytest.approx(metrics["delta_e00"]["mean"], rel=1e-6)
+    page.select_option("#compare .compare-mode", "flip")
+    page.wait_for_function("() => Number(document.querySelector('#compare .compare').dataset.ready) >= 2")
+    assert float(stats.get_attribute("data-mean")) == pytest.approx(metrics["flip"]["mean"], rel=1e-5)
+    page.select_option("#compare .compare-mode", "de2000")
+    page.wait_for_function("() => Number(document.querySelector('#compare .compare').dataset.ready) >= 3")
     screenshot(page, "regression-dashboard")

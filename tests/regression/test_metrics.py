@@ -92,3 +92,36 @@ def test_different_layouts_fail_with_a_reason() -> None:
     small = render(truth()[:8, :8], 1)
     comparison = compare_renders("scene", render(truth(), 0), small, Thresholds())
     assert comparison.verdict == "fail" and "image layout changed" in comparison.reasons[0]
+
+
+def test_delta_e00_is_at_the_exposure_that_maps_the_baseline_p99_to_white() -> None:
+    """The stored ΔE₀₀ is CIEDE2000 with the white at the baseline's 99th-percentile Y (independently:
+    scaling the white instead of the images), and the run stores that exposure."""
+    from hgcore.colour import D65_WHITE_XYZ, bands_to_xyz, ciede2000, xyz_to_lab, y_bar_integral_nm
+
+    baseline, current = render(truth(), 0, 0.05), render(truth() * np.linspace(1.3, 0.7, BANDS), 1, 0.05)
+    comparison = compare_renders("scene", baseline, current, Thresholds())
+    xyz_a, xyz_c = bands_to_xyz(baseline.bands, CENTERS_NM), bands_to_xyz(current.bands, CENTERS_NM)
+    white_y = float(np.percentile(xyz_a[..., 1], 99.0))
+    expected = ciede2000(
+        xyz_to_lab(xyz_a, D65_WHITE_XYZ * white_y), xyz_to_lab(xyz_c, D65_WHITE_XYZ * white_y)
+    )
+    # The EV is on the scale of linear sRGB (Y / ∫ȳ dλ), as the viewer's exposure.
+    assert comparison.metrics["exposure_ev"] == pytest.approx(
+        -np.log2(white_y / y_bar_integral_nm()), rel=1e-12
+    )
+    assert comparison.metrics["delta_e00"]["p95"] == pytest.approx(np.percentile(expected, 95.0), rel=1e-9)
+    assert comparison.metrics["delta_e00"]["exposure_ev"] == comparison.metrics["exposure_ev"]
+
+
+def test_flip_passes_noise_and_fails_a_colour_shift() -> None:
+    noise = compare_renders("scene", render(truth(), 0, 0.05), render(truth(), 1, 0.05), Thresholds())
+    assert noise.verdict == "pass", noise.reasons
+    # Identical noise statistics: the ꟻLIP of a noise pair is about its bootstrap noise level.
+    assert 0.0 < noise.metrics["flip"]["mean"] < 2 * noise.metrics["flip"]["mean_noise"]
+    shifted = truth() * np.linspace(1.6, 0.4, BANDS)
+    changed = compare_renders("scene", render(truth(), 0, 0.05), render(shifted, 1, 0.05), Thresholds())
+    assert any(r.startswith("scene: flip_mean is") for r in changed.reasons), changed.reasons
+    assert changed.metrics["flip"]["mean_excess"] > Thresholds().max_flip_mean
+    # ꟻLIP errors lie in [0, 1].
+    assert 0.0 <= changed.metrics["flip"]["mean"] <= changed.metrics["flip"]["max"] <= 1.0

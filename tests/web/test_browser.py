@@ -77,9 +77,12 @@ def test_canvas_matches_server_display_and_exposure(
     page: Any, served: Served, cylinder_job: RenderedJob
 ) -> None:
     open_viewer(page, served, cylinder_job.job_id)
-    # The viewer opens at the automatic exposure (99th luminance percentile → white, 0.5 EV steps).
-    ev = float(page.input_value("#ev-slider"))
-    assert ev == np.clip(round(auto_exposure_ev(cylinder_job.exr.rgb) * 2) / 2, -10, 10)
+    # The viewer opens at the automatic exposure (99th luminance percentile → white), not rounded: the
+    # service's value from the bands equals the RGB luminance rule to float rounding.
+    ev = float(page.get_attribute("#image-canvas", "data-ev"))
+    assert ev == served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["exposure_ev"]
+    assert ev == pytest.approx(auto_exposure_ev(cylinder_job.exr.rgb), abs=1e-3)
+    assert page.input_value("#ev-value") == f"{ev:.2f}"
     shown = canvas_rgb(page)
     png = served.get(f"/v1/jobs/{cylinder_job.job_id}/display.png", ev=ev, tonemap="clamp").content
     server = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int64)
@@ -88,7 +91,7 @@ def test_canvas_matches_server_display_and_exposure(
     screenshot(page, "viewer_srgb")
 
     # +2 EV: every linear value ×4; the canvas follows display_rgb8(rgb, ev + 2) and brightens.
-    brighter_ev = ev + 2.0 if ev <= 8.0 else ev - 2.0
+    brighter_ev = round(ev + 2.0, 1)
     count = drawn_count(page)
     page.fill("#ev-slider", str(brighter_ev))
     redrawn(page, count)
@@ -101,7 +104,7 @@ def test_canvas_matches_server_display_and_exposure(
     redrawn(page, count)
     expected = display_rgb8(cylinder_job.exr.rgb, brighter_ev, "aces").astype(np.int64)
     assert np.abs(canvas_rgb(page) - expected).max() <= 1
-    assert page.inner_text("#ev-label") == f"{brighter_ev:.1f} EV"
+    assert page.input_value("#ev-value") == f"{brighter_ev:.2f}"
 
 
 def test_wavelength_slider_switches_bands(page: Any, served: Served, cylinder_job: RenderedJob) -> None:
@@ -215,23 +218,28 @@ def test_inspector_spectrum_equals_the_exr(page: Any, served: Served, cylinder_j
     box = page.locator("#image-canvas").bounding_box()
     scale = box["width"] / SIZE_PX
     page.mouse.click(box["x"] + (x + 0.5) * scale, box["y"] + (y + 0.5) * scale)
-    page.wait_for_selector('#spectrum-plot circle[data-slot="A"]')
+    page.wait_for_selector('#spectrum-plot circle[data-series="A"]')
     points = page.evaluate(
-        """() => [...document.querySelectorAll('#spectrum-plot circle[data-slot="A"]')]
-            .map((c) => [Number(c.dataset.wavelengthNm), Number(c.dataset.value)])"""
+        """() => [...document.querySelectorAll('#spectrum-plot circle[data-series="A"]')]
+            .map((c) => [Number(c.dataset.x), Number(c.dataset.y)])"""
     )
     bands = exr.band_names()
     assert [p[0] for p in points] == [float(n[3:-2].replace(",", ".")) for n in bands]
     np.testing.assert_array_equal([p[1] for p in points], [float(exr.channels[n][y, x]) for n in bands])
     assert page.inner_text('[data-slot="A"] .pixel-title') == f"Pixel A: ({x}, {y})"
+    # ℓ₁ at the wavelength slider's λ (∝ λ from the 550 nm the EXR holds), as the ellipse hover.
+    nm = float(page.inner_text("#band-label").split()[0])
     l1_row = page.get_attribute('[data-slot="A"] tr[data-key="l1_um"]', "data-value")
-    assert float(l1_row) == float(exr.channels["coherence.l1_um"][y, x])
+    assert float(l1_row) == pytest.approx(float(exr.channels["coherence.l1_um"][y, x]) * nm / 550.0, rel=1e-6)
+    assert f"at {nm:.0f} nm" in page.inner_text('[data-slot="A"] caption')
+    angle_row = float(page.get_attribute('[data-slot="A"] tr[data-key="angle"]', "data-value"))
+    assert angle_row == pytest.approx(np.degrees(float(exr.channels["coherence.angle"][y, x])), rel=1e-6)
     # Second pixel (slot B), by keyboard-accessible form: two spectra in the plot.
     page.check('input[name="inspect-slot"][value="B"]')
     page.fill("#inspect-x", "0")
     page.fill("#inspect-y", "0")
     page.press("#inspect-y", "Enter")
-    page.wait_for_selector('#spectrum-plot circle[data-slot="B"]')
+    page.wait_for_selector('#spectrum-plot circle[data-series="B"]')
     assert page.inner_text('[data-slot="B"] .pixel-title') == "Pixel B: (0, 0)"
     screenshot(page, "viewer_inspector")
 
@@ -300,13 +308,16 @@ def test_compare_view_shows_delta_e(
     page.check(f'tr[data-job-id="{b}"] .job-select')
     page.click("#compare-selected")
     page.wait_for_function("() => Number(document.querySelector('.compare')?.dataset.ready) >= 1")
+    # Opens at a's automatic exposure (not 0 EV), the one regression runs use.
+    auto_ev = served.get(f"/v1/jobs/{a}/layers").json()["exposure_ev"]
     left = canvas_rgb(page, ".compare-left")
-    assert np.abs(left - display_rgb8(cylinder_job.exr.rgb, 0.0, "clamp")).max() <= 1
+    assert np.abs(left - display_rgb8(cylinder_job.exr.rgb, auto_ev, "clamp")).max() <= 1
     page.fill(".compare-split", "30")
     screenshot(page, "compare_split")
     page.select_option(".compare-mode", "de2000")
     page.wait_for_function("() => Number(document.querySelector('.compare').dataset.ready) >= 2")
     response = served.get("/v1/compare", a=a, b=b, mode="de2000")
+    assert float(response.headers["X-Exposure-EV"]) == auto_ev
     import json
 
     stats = json.loads(response.headers["X-Stats"])
@@ -314,7 +325,22 @@ def test_compare_view_shows_delta_e(
     assert "ΔE₀₀" in page.inner_text(".compare-stats")
     diff = np.frombuffer(response.content, dtype="<f4").reshape(SIZE_PX, SIZE_PX)
     assert np.abs(canvas_rgb(page, ".compare-diff") - viridis8(diff / 10.0)).max() <= 1
+    # Hover readout: both images' values and the map's at the pixel under the pointer.
+    stage = page.locator(".compare-stage").bounding_box()
+    scale = stage["width"] / SIZE_PX
+    page.mouse.move(stage["x"] + 6.5 * scale, stage["y"] + 9.5 * scale)
+    readout = page.inner_text(".compare-readout")
+    assert readout.startswith("(6, 9) linear R G B a: ")
+    assert float(readout.rsplit("de2000 ", 1)[1]) == pytest.approx(float(diff[9, 6]), rel=5e-3)  # 3 digits
     screenshot(page, "compare_de2000")
+    page.select_option(".compare-mode", "flip")
+    page.wait_for_function("() => Number(document.querySelector('.compare').dataset.ready) >= 3")
+    flip_stats = json.loads(served.get("/v1/compare", a=a, b=b, mode="flip").headers["X-Stats"])
+    assert float(page.get_attribute(".compare-stats", "data-p95")) == pytest.approx(
+        flip_stats["p95"], rel=1e-12
+    )
+    assert "ꟻLIP" in page.inner_text(".compare-stats")
+    screenshot(page, "compare_flip")
 
 
 def test_controls_are_labelled_and_keyboard_reachable(
@@ -355,11 +381,11 @@ def test_controls_are_labelled_and_keyboard_reachable(
     before = page.inner_text("#zoom-label")
     page.keyboard.press("+")
     assert page.inner_text("#zoom-label") != before
-    # Arrow keys move the exposure slider by its step (0.5 EV).
+    # Arrow keys move the exposure slider by its step (0.1 EV).
     page.focus("#ev-slider")
     ev = float(page.input_value("#ev-slider"))
     page.keyboard.press("ArrowLeft")
-    assert page.inner_text("#ev-label") == f"{ev - 0.5:.1f} EV"
+    assert page.input_value("#ev-value") == f"{ev - 0.1:.2f}"
 
 
 def test_narrow_viewport_has_no_horizontal_overflow(

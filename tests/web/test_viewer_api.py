@@ -9,11 +9,14 @@ from __future__ import annotations
 import io
 import json
 import math
+from typing import Any
 
+import httpx
 import numpy as np
+import pytest
 from PIL import Image
 
-from hgcore.imaging import display_rgb8, tone_map
+from hgcore.imaging import auto_exposure_ev, display_rgb8
 from hgcore.store.filesystem import FilesystemStore
 from service.viewer_data import DecodedImageCache
 from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene
@@ -123,15 +126,17 @@ def test_compare_modes_against_independent_formulas(
     assert math.isclose(stats["max"], float(absolute.max()), rel_tol=1e-6)
     same = _floats(served.get("/v1/compare", a=ids["a"], b=ids["a"], mode="de2000"))
     np.testing.assert_array_equal(same, 0.0)
-    de = _floats(served.get("/v1/compare", **ids, mode="de2000", ev=-3.0, tonemap="reinhard"))
-    # Independent path: IEC 61966-2-1 sRGB → XYZ matrix (the service inverts the renderer's XYZ → sRGB
-    # matrix; both agree to ~1e-4) and the CIE 1976 L*a*b* formulas; then ΔE00 of the same colour pair
-    # changes by at most ~1e-2 for these 1e-4 input differences.
+    response = served.get("/v1/compare", **ids, mode="de2000", ev=-3.0)
+    de = _floats(response)
+    assert float(response.headers["X-Exposure-EV"]) == -3.0
+    # Independent path: XYZ from the EXR's linear sRGB by the IEC 61966-2-1 matrix (the renderer wrote
+    # RGB from the bands' XYZ with the inverse matrix; both agree to ~1e-4), exposed, CIE 1976 L*a*b*
+    # with the D65 white at Y = 1; ΔE00 of the same colour pair changes by ~1e-2 for 1e-4 differences.
     srgb_to_xyz = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
     white = np.array([0.95047, 1.0, 1.08883])
 
-    def lab(rgb: np.ndarray) -> np.ndarray:
-        t = tone_map(rgb * 2.0**-3.0, "reinhard") @ srgb_to_xyz.T / white
+    def lab(rgb: np.ndarray, ev: float) -> np.ndarray:
+        t = (rgb * 2.0**ev) @ srgb_to_xyz.T / white
         f = np.where(t > (6 / 29) ** 3, np.cbrt(t), t / (3 * (6 / 29) ** 2) + 4 / 29)
         return np.stack(
             [116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1
@@ -139,8 +144,70 @@ def test_compare_modes_against_independent_formulas(
 
     from hgcore.colour import ciede2000
 
-    np.testing.assert_allclose(de, ciede2000(lab(a), lab(b)), rtol=0, atol=2e-2)
+    np.testing.assert_allclose(de, ciede2000(lab(a, -3.0), lab(b, -3.0)), rtol=0, atol=2e-2)
     assert float(de.max()) > 0.5  # different seeds: visibly different noise
+    # Without ev: a's automatic exposure, the 99th percentile of its luminance mapped to white.
+    response = served.get("/v1/compare", **ids, mode="de2000")
+    auto_ev = float(response.headers["X-Exposure-EV"])
+    assert auto_ev == pytest.approx(auto_exposure_ev(a), abs=1e-3)
+    np.testing.assert_allclose(_floats(response), ciede2000(lab(a, auto_ev), lab(b, auto_ev)), atol=2e-2)
+    catalogue = served.get(f"/v1/jobs/{ids['a']}/layers").json()
+    assert catalogue["exposure_ev"] == auto_ev
+
+
+def test_compare_flip_is_ldr_flip_of_the_displayed_images(
+    served: Served, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
+) -> None:
+    import flip_evaluator
+
+    ids = {"a": cylinder_job.job_id, "b": cylinder_job_reseeded.job_id}
+    response = served.get("/v1/compare", **ids, mode="flip")
+    flip = _floats(response)
+    ev = float(response.headers["X-Exposure-EV"])
+    # Independently: the EXRs' RGB as display_rgb8 shows them with the clamp tone map, in [0, 1].
+    reference, test = (
+        display_rgb8(job.exr.rgb, ev, "clamp") / 255.0 for job in (cylinder_job, cylinder_job_reseeded)
+    )
+    expected, _, _ = flip_evaluator.evaluate(
+        reference.astype(np.float32), test.astype(np.float32), "LDR", applyMagma=False
+    )
+    # 8-bit quantisation of the independent path (±0.5/255) moves ꟻLIP by well under 0.02.
+    np.testing.assert_allclose(flip, expected[..., 0], atol=2e-2)
+    assert 0.0 < float(flip.mean()) < 1.0
+    same = _floats(served.get("/v1/compare", a=ids["a"], b=ids["a"], mode="flip"))
+    np.testing.assert_array_equal(same, 0.0)
+
+
+def test_uploaded_exr_is_viewable_and_validated(served: Served, cylinder_job: RenderedJob) -> None:
+    exr = served.data_dir / "upload-test.exr"
+    served.client.download(cylinder_job.job_id, "image.exr", exr)
+    headers = {"Authorization": f"Bearer {served.token}", "Content-Type": "image/x-exr"}
+    response = httpx.post(served.base_url + "/v1/images", content=exr.read_bytes(), headers=headers)
+    assert response.status_code == 201, response.text
+    image_id = response.json()["id"]
+    assert response.json()["width"] == SIZE_PX
+    pixel = served.get(f"/v1/jobs/{image_id}/pixel", x=3, y=5).json()
+    names = cylinder_job.exr.band_names()
+    assert pixel["spectrum"] == pytest.approx([float(cylinder_job.exr.channels[n][5, 3]) for n in names])
+    assert served.get(f"/v1/jobs/{image_id}/layers").json()["uploaded"] is True
+    # Another owner cannot see it.
+    other = served.client.create_token("eve", ["read"])["token"]
+    assert served.get(f"/v1/jobs/{image_id}/layers", token=other).status_code == 404
+    # Not an EXR; an EXR without spectral channels; too large.
+    response = httpx.post(served.base_url + "/v1/images", content=b"P6 2 2 255\n", headers=headers)
+    assert response.status_code == 422 and response.json()["detail"].startswith("file: not an OpenEXR")
+    import OpenImageIO as oiio
+
+    grey = served.data_dir / "grey.exr"
+    out = oiio.ImageOutput.create(str(grey))
+    out.open(str(grey), oiio.ImageSpec(4, 4, 3, oiio.HALF))
+    out.write_image(np.full((4, 4, 3), 0.5, dtype=np.float32))
+    out.close()
+    response = httpx.post(served.base_url + "/v1/images", content=grey.read_bytes(), headers=headers)
+    assert response.status_code == 422 and "at least 2 spectral channels" in response.json()["detail"]
+    huge = b"\x76\x2f\x31\x01" + b"\0" * (64 * 1024 * 1024)
+    response = httpx.post(served.base_url + "/v1/images", content=huge, headers=headers, timeout=60)
+    assert response.status_code == 413
 
 
 def test_viewer_errors_name_the_parameter(served: Served, cylinder_job: RenderedJob) -> None:
@@ -234,3 +301,30 @@ def test_diagonal_cylinder_gives_45_degree_ellipses(
     for ellipse in grid:
         # ℓ₁ ∥ d × (x̂ + ẑ)/√2 projects onto the image diagonal (1, 1) (conftest): angle π/4 (mod π).
         assert abs(math.remainder(ellipse["angle"] - math.pi / 4, math.pi)) < 1e-3
+
+
+def test_diagnostics_exr_holds_the_coherence_channels(
+    served: Served, cylinder_job: RenderedJob, tmp_path: Any
+) -> None:
+    from tests.web.conftest import read_exr
+
+    response = served.get(f"/v1/jobs/{cylinder_job.job_id}/diagnostics.exr")
+    assert response.status_code == 200 and response.headers["content-type"] == "image/x-exr"
+    (tmp_path / "d.exr").write_bytes(response.content)
+    channels = read_exr(tmp_path / "d.exr").channels
+    expected = {n for n in cylinder_job.exr.channels if n.startswith("coherence.")}
+    assert set(channels) == expected and "coherence.l1_um" in expected
+    for name in expected:
+        np.testing.assert_array_equal(channels[name], cylinder_job.exr.channels[name])
+
+
+def test_one_band_image_has_an_exposure_and_refuses_colour_metrics() -> None:
+    """A scene may render one band: no colour, so the RGB luminance rule gives the exposure and ΔE₀₀/ꟻLIP
+    are refused by name instead of failing the catalogue."""
+    from service.viewer_data import _decoded, difference_map
+
+    rgb = np.full((4, 4), 0.25, dtype=np.float32)
+    image = _decoded(4, 4, {"S0.550,000000nm": rgb, "R": rgb, "G": rgb, "B": rgb})
+    assert image.exposure_ev() == pytest.approx(2.0)  # luminance 0.25 → ×4 is white
+    with pytest.raises(ValueError, match=r"^mode: de2000 needs at least 2 spectral bands"):
+        difference_map(image, image, "de2000")

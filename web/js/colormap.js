@@ -23,19 +23,30 @@ export function viridis(t) {
   return rgb;
 }
 
+export const SYMLOG_DECADES = 3;
+
 /**
- * A scale from values to t ∈ [0, 1]: linear over [lo, hi], or log10 over [lo, hi] (lo > 0 required;
- * falls back to linear otherwise).
+ * A scale from values to t ∈ [0, 1]: linear over [lo, hi], or logarithmic (`log`). Log of a range with
+ * lo > 0 is log10 over [lo, hi]; when lo ≤ 0 (a black pixel in the 1st percentile, negative values) it
+ * is symlog: s(v) = sign(v)·log10(1 + |v|/c), linear within ±c, with c = max(|lo|, |hi|)·10^−3 (three
+ * decades of log range below the largest magnitude), mapped linearly from s(lo) to s(hi).
+ * `kind` says which: "linear", "log" or "symlog".
  */
 export function makeScale(lo, hi, log = false) {
-  const useLog = log && lo > 0 && hi > lo;
-  if (useLog) {
+  if (log && lo > 0 && hi > lo) {
     const a = Math.log10(lo);
     const span = Math.log10(hi) - a;
-    return { lo, hi, log: true, t: (v) => (v > 0 ? (Math.log10(v) - a) / span : 0), value: (t) => Math.pow(10, a + t * span) };
+    return { lo, hi, log: true, kind: "log", t: (v) => (v > 0 ? (Math.log10(v) - a) / span : 0), value: (t) => Math.pow(10, a + t * span) };
+  }
+  if (log && hi > lo) {
+    const c = Math.max(Math.abs(lo), Math.abs(hi)) * Math.pow(10, -SYMLOG_DECADES);
+    const s = (v) => Math.sign(v) * Math.log10(1 + Math.abs(v) / c);
+    const inverse = (u) => Math.sign(u) * c * (Math.pow(10, Math.abs(u)) - 1);
+    const [s0, span] = [s(lo), s(hi) - s(lo)];
+    return { lo, hi, log: true, kind: "symlog", linearWithin: c, t: (v) => (s(v) - s0) / span, value: (t) => inverse(s0 + t * span) };
   }
   const span = hi > lo ? hi - lo : 1;
-  return { lo, hi, log: false, t: (v) => (v - lo) / span, value: (t) => lo + t * span };
+  return { lo, hi, log: false, kind: "linear", t: (v) => (v - lo) / span, value: (t) => lo + t * span };
 }
 
 /** Compact number with its unit: 3 significant digits, exponent for very large or small values. */
@@ -51,7 +62,9 @@ export function drawColourBar(container, scale, unit, title) {
   container.replaceChildren();
   const heading = document.createElement("div");
   heading.className = "colourbar-title";
-  heading.textContent = `${title}${unit && unit !== "1" ? ` [${unit}]` : ""}${scale.log ? " (log)" : ""}`;
+  const kind = scale.kind === "symlog" ? ` (symlog: linear within ±${formatValue(scale.linearWithin)})` : scale.log ? " (log)" : "";
+  heading.textContent = `${title}${unit && unit !== "1" ? ` [${unit}]` : ""}${kind}`;
+  container.dataset.scale = scale.kind || "linear";
   const canvas = document.createElement("canvas");
   canvas.width = 256;
   canvas.height = 12;

@@ -1,35 +1,41 @@
 // Compare two jobs' images: side by side with a split slider, or a difference map (absolute, relative,
-// CIEDE2000 ΔE₀₀) in false colour with its statistics. Reused by the regression dashboard.
+// CIEDE2000 ΔE₀₀, ꟻLIP) in false colour with its statistics. Reused by the regression dashboard.
 //
 // Usage:
 //   import { mountCompare } from "/web/js/compare.js";
 //   import { Api } from "/web/js/api.js";
 //   const view = await mountCompare(document.querySelector("#here"), {
 //     leftJobId: "<32 hex>", rightJobId: "<32 hex>", api: new Api(),
-//     mode: "split",          // "split" | "abs" | "rel" | "de2000"   (optional)
-//     ev: 0, tonemap: "clamp", // display settings of both images and of ΔE₀₀ (optional)
+//     mode: "split",          // "split" | "abs" | "rel" | "de2000" | "flip"   (optional)
+//     ev: 3.2,                // exposure of both images and of ΔE₀₀ / ꟻLIP (optional; default: the
+//                             // service's automatic exposure of a, as a regression run uses)
+//     tonemap: "clamp",       // tone map of the two displayed images (optional)
+//     names: ["baseline", "current"],  // labels of a and b (optional)
 //   });
 //   await view.update({ mode: "de2000" });   // change any option; view.stats holds {mean, p95, max}
 //   view.destroy();                           // remove the DOM it created
 //
 // `api` is an instance of Api (web/js/api.js) or any object with the same `floats(path)` method.
-// Both jobs must have succeeded and have images of the same size. ΔE₀₀ is computed by the server
-// (GET /v1/compare, hgcore.colour) on both images as displayed with the same EV and tone map.
+// Both jobs must have succeeded and have images of the same size. ΔE₀₀ and ꟻLIP are computed by the
+// server (GET /v1/compare → service/image_metrics.py, the code regression runs use) from the spectral
+// bands at the exposure shown here; the tone map only changes how the two images are displayed.
 
 import { displayRgb8, TONE_MAPS } from "./imaging.js";
 import { drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";
 
 const DE2000_RANGE = [0, 10]; // ΔE₀₀ ≈ 1 is just noticeable; 10 already reads as a different colour
+const FLIP_RANGE = [0, 1]; // ꟻLIP's per-pixel error is in [0, 1]
 const MODES = [
   ["split", "side by side (split slider)"],
   ["abs", "absolute difference |b − a|"],
   ["rel", "relative difference |b − a| / |a|"],
   ["de2000", "CIEDE2000 ΔE₀₀"],
+  ["flip", "ꟻLIP (LDR, as displayed)"],
 ];
 let instances = 0;
 
 /** Mount the compare view into `element`; resolves to a controller {update, destroy, stats, root}. */
-export async function mountCompare(element, { leftJobId, rightJobId, api, mode = "split", ev = 0, tonemap = "clamp" }) {
+export async function mountCompare(element, { leftJobId, rightJobId, api, mode = "split", ev = null, tonemap = "clamp", names = [] }) {
   if (!leftJobId || !rightJobId) throw new Error("leftJobId: both leftJobId and rightJobId are required");
   if (!TONE_MAPS.includes(tonemap)) throw new Error(`tonemap: must be one of ${TONE_MAPS.join(", ")}`);
   const id = `compare-${++instances}`;
@@ -41,8 +47,9 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
       <label for="${id}-mode">View</label>
       <select id="${id}-mode" class="compare-mode">${MODES.map(([v, t]) => `<option value="${v}">${t}</option>`).join("")}</select>
       <label for="${id}-ev">Exposure</label>
-      <input id="${id}-ev" class="compare-ev" type="range" min="-10" max="10" step="0.5">
-      <output class="compare-ev-label" for="${id}-ev"></output>
+      <input id="${id}-ev" class="compare-ev" type="range" step="0.1">
+      <input class="compare-ev-value" type="number" min="-64" max="64" step="0.1" aria-label="exposure in EV"> EV
+      <output class="compare-ev-label small" for="${id}-ev"></output>
       <label for="${id}-tonemap">Tone map</label>
       <select id="${id}-tonemap" class="compare-tonemap">${TONE_MAPS.map((t) => `<option>${t}</option>`).join("")}</select>
       <label for="${id}-split">Split</label>
@@ -55,21 +62,27 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
       <div class="compare-divider" aria-hidden="true"></div>
       <canvas class="compare-diff" role="img" aria-label="difference map" hidden></canvas>
     </div>
+    <output class="compare-readout small" aria-live="off"></output>
     <div class="compare-legend"></div>
     <p class="compare-stats" aria-live="polite"></p>`;
   element.append(root);
   const $ = (selector) => root.querySelector(selector);
-  const options = { mode, ev, tonemap };
-  const [left, right] = await Promise.all([
+  const [left, right, catalogue] = await Promise.all([
     api.floats(`/v1/jobs/${leftJobId}/layers/rgb?format=f32`),
     api.floats(`/v1/jobs/${rightJobId}/layers/rgb?format=f32`),
+    api.json(`/v1/jobs/${leftJobId}/layers`),
   ]);
+  // The slider spans a's automatic exposure ± 12 EV (it always holds it); the box takes any EV.
+  const autoEv = catalogue.exposure_ev;
+  const options = { mode, ev: ev ?? autoEv, tonemap };
+  $(".compare-ev").min = String(Math.round(autoEv) - 12);
+  $(".compare-ev").max = String(Math.round(autoEv) + 12);
   if (left.width !== right.width || left.height !== right.height) {
     root.remove();
     throw new Error(`rightJobId: image is ${right.width}x${right.height}, left is ${left.width}x${left.height}`);
   }
-  $(".compare-left-name").textContent = `a: ${leftJobId.slice(0, 8)}`;
-  $(".compare-right-name").textContent = `b: ${rightJobId.slice(0, 8)}`;
+  $(".compare-left-name").textContent = `a: ${names[0] || leftJobId.slice(0, 8)}`;
+  $(".compare-right-name").textContent = `b: ${names[1] || rightJobId.slice(0, 8)}`;
   for (const canvas of root.querySelectorAll("canvas")) {
     canvas.width = left.width;
     canvas.height = left.height;
@@ -77,6 +90,19 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
   $(".compare-stage").style.aspectRatio = `${left.width} / ${left.height}`;
 
   const controller = { root, stats: null, update, destroy: () => root.remove() };
+  let lastDiff = null;
+
+  // Hover readout: both images' linear RGB at the pixel under the pointer, and the difference map's value.
+  $(".compare-stage").addEventListener("pointermove", (event) => {
+    const rect = $(".compare-stage").getBoundingClientRect();
+    const x = Math.floor(((event.clientX - rect.left) / rect.width) * left.width);
+    const y = Math.floor(((event.clientY - rect.top) / rect.height) * left.height);
+    if (x < 0 || y < 0 || x >= left.width || y >= left.height) return;
+    const i = y * left.width + x;
+    const rgb = (floats) => [0, 1, 2].map((c) => formatValue(floats.data[3 * i + c])).join(" ");
+    const diffText = options.mode !== "split" && lastDiff ? `; ${options.mode} ${formatValue(lastDiff[i])}` : "";
+    $(".compare-readout").textContent = `(${x}, ${y}) linear R G B a: ${rgb(left)}, b: ${rgb(right)}${diffText}`;
+  });
 
   function drawImage(canvas, floats) {
     const image = new ImageData(floats.width, floats.height);
@@ -91,10 +117,11 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
   }
 
   async function drawDifference() {
-    const query = `a=${leftJobId}&b=${rightJobId}&mode=${options.mode}&ev=${options.ev}&tonemap=${options.tonemap}`;
+    const query = `a=${leftJobId}&b=${rightJobId}&mode=${options.mode}&ev=${options.ev}`;
     const diff = await api.floats(`/v1/compare?${query}`);
     const stats = JSON.parse(diff.headers.get("X-Stats"));
-    const range = options.mode === "de2000" ? DE2000_RANGE : [0, stats.p95 > 0 ? stats.p95 : stats.max || 1];
+    const fixed = { de2000: DE2000_RANGE, flip: FLIP_RANGE }[options.mode];
+    const range = fixed || [0, stats.p95 > 0 ? stats.p95 : stats.max || 1];
     const scale = makeScale(range[0], range[1], false);
     const image = new ImageData(diff.width, diff.height);
     for (let i = 0; i < diff.data.length; i++) {
@@ -102,23 +129,29 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
       image.data.set([r, g, b, 255], 4 * i);
     }
     $(".compare-diff").getContext("2d").putImageData(image, 0, 0);
+    lastDiff = diff.data;
     const [unit, title] = {
       abs: ["W·m⁻²·sr⁻¹·nm⁻¹", "|b − a| (mean of R, G, B)"],
       rel: ["1", "|b − a| / |a|"],
       de2000: ["1", "ΔE₀₀"],
+      flip: ["1", "ꟻLIP"],
     }[options.mode];
     drawColourBar($(".compare-legend"), scale, unit, title);
     controller.stats = stats;
     const statsNode = $(".compare-stats");
     Object.assign(statsNode.dataset, { mode: options.mode, mean: stats.mean, p95: stats.p95, max: stats.max });
-    statsNode.textContent = `${title}: mean ${formatValue(stats.mean)}, 95th percentile ${formatValue(stats.p95)}, max ${formatValue(stats.max)}`;
+    const at = ["de2000", "flip"].includes(options.mode) ? ` at ${Number(options.ev).toFixed(2)} EV` : "";
+    statsNode.dataset.ev = String(options.ev);
+    statsNode.textContent = `${title}${at}: mean ${formatValue(stats.mean)}, 95th percentile ${formatValue(stats.p95)}, max ${formatValue(stats.max)}`;
   }
 
   async function update(changes = {}) {
     Object.assign(options, changes);
     $(".compare-mode").value = options.mode;
     $(".compare-ev").value = String(options.ev);
-    $(".compare-ev-label").textContent = `${Number(options.ev).toFixed(1)} EV`;
+    $(".compare-ev-value").value = Number(options.ev).toFixed(2);
+    const [lo, hi] = [Number($(".compare-ev").min), Number($(".compare-ev").max)];
+    $(".compare-ev-label").textContent = options.ev < lo || options.ev > hi ? `beyond the slider (${lo}…${hi} EV)` : `auto ${autoEv.toFixed(2)} EV`;
     $(".compare-tonemap").value = options.tonemap;
     const split = options.mode === "split";
     $(".compare-diff").hidden = split;
@@ -140,6 +173,7 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
   const report = (promise) => promise.catch((error) => ($(".compare-stats").textContent = String(error.message || error)));
   $(".compare-mode").addEventListener("change", (e) => report(update({ mode: e.target.value })));
   $(".compare-ev").addEventListener("input", (e) => report(update({ ev: Number(e.target.value) })));
+  $(".compare-ev-value").addEventListener("change", (e) => report(update({ ev: Number(e.target.value) })));
   $(".compare-tonemap").addEventListener("change", (e) => report(update({ tonemap: e.target.value })));
   $(".compare-split").addEventListener("input", applySplit);
   return update();

@@ -6,6 +6,11 @@
 //                 each on max(x, 0) per channel, then clipped to [0, 1]
 //   sRGB curve:   12.92·x for x ≤ 0.0031308, else 1.055·x^(1/2.4) − 0.055   (IEC 61966-2-1)
 //   8-bit:        floor(255·v + 0.5)   (round half up)
+//
+// Two display controls of tev go beyond hgrender/imaging.py (they are viewer-only; at their defaults,
+// offset 0 and the sRGB curve, the display is exactly display_rgb8):
+//   offset:       added after the exposure, before the tone map: x·2^EV + offset
+//   gamma γ:      v^(1/γ) instead of the sRGB curve
 
 export const TONE_MAPS = ["clamp", "reinhard", "aces"];
 export const REC709_LUMINANCE = [0.2126, 0.7152, 0.0722];
@@ -26,22 +31,22 @@ export function srgbEncode(linear) {
   return linear <= 0.0031308 ? 12.92 * linear : 1.055 * Math.pow(linear, 1 / 2.4) - 0.055;
 }
 
-/** 8-bit display value of one linear channel value. */
-export function displayValue8(linear, exposureEv, operator) {
-  const encoded = srgbEncode(toneMap(linear * Math.pow(2, exposureEv), operator));
-  return Math.floor(encoded * 255 + 0.5);
+/** The transfer curve: sRGB (gamma null) or v^(1/γ). */
+function encoder(gamma) {
+  return gamma ? (v) => Math.pow(v, 1 / gamma) : srgbEncode;
 }
 
 /**
  * Fill `rgba` (Uint8ClampedArray, 4 per pixel) with the display of interleaved linear RGB `rgb`
- * (Float32Array, 3 per pixel).
+ * (Float32Array, 3 per pixel). `offset` and `gamma` as in tev (see the top of this file).
  */
-export function displayRgb8(rgb, rgba, exposureEv, operator) {
+export function displayRgb8(rgb, rgba, exposureEv, operator, { offset = 0, gamma = null } = {}) {
   const scale = Math.pow(2, exposureEv);
+  const encode = encoder(gamma);
   const pixels = rgb.length / 3;
   for (let i = 0; i < pixels; i++) {
     for (let c = 0; c < 3; c++) {
-      const encoded = srgbEncode(toneMap(rgb[3 * i + c] * scale, operator));
+      const encoded = encode(toneMap(rgb[3 * i + c] * scale + offset, operator));
       rgba[4 * i + c] = Math.floor(encoded * 255 + 0.5);
     }
     rgba[4 * i + 3] = 255;

@@ -1,26 +1,62 @@
-// Pixel inspector: spectrum across bands (plot), linear RGB and coherence values of up to two pixels
-// (slots A and B) for side-by-side comparison. Values come from GET /v1/jobs/{id}/pixel.
+// Pixel inspector: spectrum across bands (plot with nm and radiance axes, legend, hover readout), linear
+// RGB and coherence values of up to two pixels (slots A and B, marked on the image by the viewer), and
+// each pixel's spectrum as CSV. Values come from GET /v1/jobs/{id}/pixel.
+//
+// Units match the ellipse hover: lengths and area at the wavelength slider's λ (the renderer reports them
+// at 550 nm; they scale ∝ λ and ∝ λ²), angles in degrees (from image +x towards +y up).
 
 import { formatValue } from "./colormap.js";
+import { drawPlot } from "./plot.js";
 
-const SLOT_COLOURS = { A: "#fbbc04", B: "#f28b82" };
+export const SLOT_COLOURS = { A: "#fbbc04", B: "#f28b82" };
+export const REFERENCE_WAVELENGTH_NM = 550;
+// key, label, unit, power of λ/550 nm it scales with (null: not a length), or "deg" for the angle
 const COHERENCE_ROWS = [
-  ["l1_um", "ℓ₁", "µm"],
-  ["l2_um", "ℓ₂", "µm"],
-  ["angle", "angle", "rad"],
-  ["anisotropy", "ℓ₁/ℓ₂", "1"],
-  ["area_um2", "area", "µm²"],
-  ["r_m", "r", "m"],
-  ["Mxx", "Mxx", "m⁻²"],
-  ["Mxy", "Mxy", "m⁻²"],
-  ["Myy", "Myy", "m⁻²"],
+  ["l1_um", "ℓ₁", "µm", 1],
+  ["l2_um", "ℓ₂", "µm", 1],
+  ["angle", "angle", "°", "deg"],
+  ["anisotropy", "ℓ₁/ℓ₂", "1", 0],
+  ["area_um2", "area", "µm²", 2],
+  ["r_m", "r", "m", 0],
+  ["Mxx", "Mxx", "m⁻²", 0],
+  ["Mxy", "Mxy", "m⁻²", 0],
+  ["Myy", "Myy", "m⁻²", 0],
 ];
 
+/** A coherence value in the display units at `wavelengthNm` (lengths ∝ λ, area ∝ λ², angle in °). */
+export function coherenceDisplayValue(key, value, wavelengthNm) {
+  if (value === null || value === undefined) return null;
+  const row = COHERENCE_ROWS.find(([k]) => k === key);
+  if (row[3] === "deg") return (value * 180) / Math.PI;
+  return value * Math.pow(wavelengthNm / REFERENCE_WAVELENGTH_NM, row[3]);
+}
+
+/** CSV of one pixel's spectrum: a header naming pixel, job and unit, then wavelength_nm,value rows. */
+export function spectrumCsv(jobId, pixel) {
+  const lines = [`# job ${jobId} pixel x=${pixel.x} y=${pixel.y}; band-averaged spectral radiance in ${pixel.spectrum_unit}`, "wavelength_nm,radiance"];
+  pixel.wavelengths_nm.forEach((nm, i) => lines.push(`${nm},${pixel.spectrum[i] ?? ""}`));
+  return lines.join("\n") + "\n";
+}
+
+/** Let the browser save `blob` as `filename`. */
+export function saveBlob(blob, filename) {
+  const link = document.createElement("a");
+  link.href = URL.createObjectURL(blob);
+  link.download = filename;
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(link.href), 10_000);
+}
+
 export class PixelInspector {
-  constructor(root, api, { onError }) {
+  /** `wavelengthNm()` gives the slider's λ; `onChange(pixels)` is called when A or B changes. */
+  constructor(root, api, { onError, wavelengthNm, onChange }) {
     this.root = root;
     this.api = api;
     this.onError = onError;
+    this.wavelengthNm = wavelengthNm;
+    this.onChange = onChange;
     this.pixels = { A: null, B: null };
     root.querySelector("#inspect-form").addEventListener("submit", (event) => {
       event.preventDefault();
@@ -32,6 +68,12 @@ export class PixelInspector {
       this.pixels.B = null;
       this.render();
     });
+    for (const slot of ["A", "B"]) {
+      root.querySelector(`.pixels > [data-slot="${slot}"] .pixel-csv`).addEventListener("click", () => {
+        const pixel = this.pixels[slot];
+        if (pixel) saveBlob(new Blob([spectrumCsv(this.jobId, pixel)], { type: "text/csv" }), `spectrum_${this.jobId.slice(0, 8)}_x${pixel.x}_y${pixel.y}.csv`);
+      });
+    }
   }
 
   reset(catalogue) {
@@ -56,72 +98,50 @@ export class PixelInspector {
   render() {
     for (const slot of ["A", "B"]) this.renderSlot(slot, this.pixels[slot]);
     this.plotSpectra();
+    this.onChange?.(this.pixels);
   }
 
   renderSlot(slot, pixel) {
     const box = this.root.querySelector(`.pixels > [data-slot="${slot}"]`);
     box.hidden = !pixel;
     if (!pixel) return;
+    const nm = this.wavelengthNm();
     box.querySelector(".pixel-title").textContent = `Pixel ${slot}: (${pixel.x}, ${pixel.y})`;
+    box.querySelector(".pixel-title").style.color = SLOT_COLOURS[slot];
     box.querySelector(".pixel-rgb").textContent = `linear RGB ${pixel.rgb.map((v) => formatValue(v)).join(", ")} ${pixel.spectrum_unit}`;
     const rows = COHERENCE_ROWS.map(([key, label, unit]) => {
-      const value = pixel.coherence[key];
+      const value = coherenceDisplayValue(key, pixel.coherence[key], nm);
       return `<tr data-key="${key}" data-value="${value ?? ""}"><th scope="row">${label}</th><td>${formatValue(value, unit)}</td></tr>`;
     });
     box.querySelector(".pixel-coherence").innerHTML = pixel.coherence_covered
-      ? `<caption>coherence at 550 nm</caption>${rows.join("")}`
+      ? `<caption>coherence at ${nm.toFixed(0)} nm (wavelength slider)</caption>${rows.join("")}`
       : "<caption>no coherence diagnostics at this pixel</caption>";
-    const list = box.querySelector(".pixel-spectrum");
-    list.replaceChildren(
-      ...pixel.wavelengths_nm.map((nm, i) => {
-        const item = document.createElement("li");
-        item.dataset.wavelengthNm = String(nm);
-        item.dataset.value = String(pixel.spectrum[i]);
-        item.textContent = `${nm.toFixed(1)} nm: ${formatValue(pixel.spectrum[i])}`;
-        return item;
-      }),
-    );
   }
 
-  /** Spectrum plot of slots A and B (shared axes, values in the band radiance unit). */
+  /** Spectrum plot of slots A and B (shared axes: wavelength in nm, band radiance). */
   plotSpectra() {
     const svg = this.root.querySelector("#spectrum-plot");
-    const [width, height, left, bottom, top] = [320, 160, 48, 22, 8];
-    svg.replaceChildren();
     const present = ["A", "B"].filter((s) => this.pixels[s]);
     svg.toggleAttribute("hidden", !present.length); // SVG elements have no .hidden property
     this.root.querySelector("#inspector-hint").hidden = Boolean(present.length);
-    if (!present.length) return;
-    const all = present.flatMap((s) => this.pixels[s].spectrum.filter((v) => v != null));
-    const wavelengths = this.pixels[present[0]].wavelengths_nm;
-    const [w0, w1] = [wavelengths[0], wavelengths[wavelengths.length - 1]];
-    const vMax = Math.max(...all, 1e-12);
-    const px = (nm) => left + ((nm - w0) / Math.max(w1 - w0, 1)) * (width - left - 8);
-    const py = (v) => height - bottom - (v / vMax) * (height - bottom - top);
-    const ns = "http://www.w3.org/2000/svg";
-    const add = (tag, attrs, text) => {
-      const node = document.createElementNS(ns, tag);
-      for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, v);
-      if (text) node.textContent = text;
-      svg.append(node);
-      return node;
-    };
-    add("line", { x1: left, y1: height - bottom, x2: width - 8, y2: height - bottom, class: "axis" });
-    add("line", { x1: left, y1: top, x2: left, y2: height - bottom, class: "axis" });
-    add("text", { x: left, y: height - 6, class: "tick" }, `${w0.toFixed(0)} nm`);
-    add("text", { x: width - 8, y: height - 6, class: "tick", "text-anchor": "end" }, `${w1.toFixed(0)} nm`);
-    add("text", { x: 2, y: top + 8, class: "tick" }, `${formatValue(vMax)} ${this.unit}`);
-    add("text", { x: 2, y: height - bottom, class: "tick" }, "0");
-    for (const slot of present) {
-      const pixel = this.pixels[slot];
-      const points = pixel.wavelengths_nm.map((nm, i) => `${px(nm)},${py(pixel.spectrum[i] ?? 0)}`).join(" ");
-      add("polyline", { points, fill: "none", stroke: SLOT_COLOURS[slot], "stroke-width": 2, "data-slot": slot });
-      pixel.wavelengths_nm.forEach((nm, i) => {
-        const dot = add("circle", { cx: px(nm), cy: py(pixel.spectrum[i] ?? 0), r: 3, fill: SLOT_COLOURS[slot], "data-slot": slot });
-        dot.dataset.wavelengthNm = String(nm);
-        dot.dataset.value = String(pixel.spectrum[i]);
-      });
+    this.root.querySelector("#spectrum-legend").hidden = !present.length;
+    if (!present.length) {
+      svg.replaceChildren();
+      return;
     }
-    svg.setAttribute("aria-label", `spectrum of pixel ${present.join(" and ")} in ${this.unit}`);
+    const readout = this.root.querySelector("#spectrum-readout");
+    readout.textContent = "Hover the plot for band values.";
+    drawPlot(svg, {
+      series: present.map((slot) => {
+        const p = this.pixels[slot];
+        return { id: slot, name: `${slot} (${p.x}, ${p.y})`, colour: SLOT_COLOURS[slot], points: p.wavelengths_nm.map((nm, i) => [nm, p.spectrum[i]]) };
+      }),
+      x: { label: "wavelength λ", unit: "nm", format: (nm) => nm.toFixed(0) },
+      y: { label: "radiance", unit: this.unit },
+      legend: this.root.querySelector("#spectrum-legend"),
+      readout,
+      readoutText: (nm, hits) => `λ ${nm.toFixed(1)} nm: ${hits.map((h) => `${h.name.split(" ")[0]} ${formatValue(h.point[1], this.unit)}`).join(", ")}`,
+    });
+    svg.setAttribute("aria-label", `spectrum of pixel ${present.join(" and ")}: wavelength in nm against radiance in ${this.unit}`);
   }
 }

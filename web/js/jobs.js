@@ -1,10 +1,27 @@
-// Job list (status, live progress over SSE, duration, samples/s, cancel/delete) and the submit form
-// (upload a JSON/USD scene or pick an example; override spp, resolution, modes, chunks).
+// Job list (name · short id, created, size, spp, status, live progress and ETA over SSE, duration,
+// samples/s, cancel/delete; regression jobs hidden on request) and the submit form (upload a JSON/USD
+// scene or pick an example; override spp, resolution, modes, chunks).
 
 import { formatValue } from "./colormap.js";
 
 const FINAL = new Set(["succeeded", "failed", "canceled"]);
 const MAX_STREAMS = 4; // browsers allow ~6 HTTP/1.1 connections per host; leave room for data requests
+// service/regression/runs.py names the render jobs of a run "regression <scene> (run <id>)".
+const REGRESSION_NAME = /^regression \S+ \(run [0-9a-f]{8}\)$/;
+
+/** Is this one of a regression run's render jobs? */
+export function isRegressionJob(job) {
+  return REGRESSION_NAME.test(job.name || "");
+}
+
+/** "3 min 20 s" style duration. */
+export function formatDuration(seconds) {
+  if (seconds == null || !Number.isFinite(seconds)) return "—";
+  if (seconds < 60) return `${seconds.toFixed(seconds < 10 ? 1 : 0)} s`;
+  const minutes = Math.floor(seconds / 60);
+  if (minutes < 60) return `${minutes} min ${Math.round(seconds % 60)} s`;
+  return `${Math.floor(minutes / 60)} h ${minutes % 60} min`;
+}
 
 /** Seconds the job has run (to now while running). */
 export function jobDurationS(job, nowS = Date.now() / 1000) {
@@ -47,6 +64,7 @@ export class JobsPanel {
       this.submit().catch((error) => this.onError(error));
     });
     root.querySelector("#refresh-jobs").addEventListener("click", () => this.refresh().catch((e) => this.onError(e)));
+    root.querySelector("#hide-regression").addEventListener("change", () => this.render());
     root.querySelector("#compare-selected").addEventListener("click", () => {
       if (this.selected.length === 2) this.onCompare(this.selected[0], this.selected[1]);
     });
@@ -105,8 +123,20 @@ export class JobsPanel {
     this.renderRow(this.jobs.get(id));
   }
 
+  /** The name shown for a job: its name (or "job") and the first 8 hex digits of its id, which tell
+   * two jobs of the same scene apart. */
+  label(job) {
+    return `${job.name || "job"} · ${job.id.slice(0, 8)}`;
+  }
+
   render() {
-    const ids = [...this.jobs.values()].sort((a, b) => b.timings.created_at - a.timings.created_at).map((j) => j.id);
+    const hideRegression = this.root.querySelector("#hide-regression").checked;
+    const all = [...this.jobs.values()];
+    const shown = all.filter((job) => !(hideRegression && isRegressionJob(job)));
+    const hidden = all.length - shown.length;
+    this.root.querySelector("#jobs-hidden").textContent = hidden ? `${hidden} regression job${hidden > 1 ? "s" : ""} hidden` : "";
+    for (const job of all) if (!shown.includes(job)) this.table.querySelector(`tr[data-job-id="${job.id}"]`)?.remove();
+    const ids = shown.sort((a, b) => b.timings.created_at - a.timings.created_at).map((j) => j.id);
     const rows = new Map([...this.table.querySelectorAll("tr[data-job-id]")].map((tr) => [tr.dataset.jobId, tr]));
     for (const [id, tr] of rows) if (!this.jobs.has(id)) tr.remove();
     for (const id of ids) this.renderRow(this.jobs.get(id));
@@ -116,14 +146,19 @@ export class JobsPanel {
 
   renderRow(job) {
     let tr = this.table.querySelector(`tr[data-job-id="${job.id}"]`);
+    if (!tr && this.root.querySelector("#hide-regression").checked && isRegressionJob(job)) return;
     if (!tr) {
       tr = document.createElement("tr");
       tr.dataset.jobId = job.id;
       tr.innerHTML = `
         <td><input type="checkbox" class="job-select"></td>
         <td class="job-name"></td>
+        <td class="job-created"></td>
+        <td class="job-size"></td>
+        <td class="job-spp"></td>
         <td class="job-status"></td>
         <td><progress class="job-progress" max="1" value="0"></progress> <span class="job-percent"></span></td>
+        <td class="job-eta"></td>
         <td class="job-duration"></td>
         <td class="job-rate"></td>
         <td class="job-actions">
@@ -131,7 +166,7 @@ export class JobsPanel {
           <button type="button" class="job-cancel">Cancel</button>
           <button type="button" class="job-delete">Delete</button>
         </td>`;
-      const label = job.name || job.id.slice(0, 8);
+      const label = this.label(job);
       tr.querySelector(".job-select").setAttribute("aria-label", `select ${label} for comparison`);
       tr.querySelector(".job-progress").setAttribute("aria-label", `progress of ${label}`);
       tr.querySelector(".job-select").addEventListener("change", (event) => this.toggleSelected(job.id, event.target.checked));
@@ -140,9 +175,14 @@ export class JobsPanel {
       tr.querySelector(".job-delete").addEventListener("click", () => this.remove(job.id).catch((e) => this.onError(e)));
       this.table.append(tr);
     }
-    const label = job.name || job.id.slice(0, 8);
-    tr.querySelector(".job-name").textContent = label;
+    tr.querySelector(".job-name").textContent = this.label(job);
     tr.querySelector(".job-name").title = job.id;
+    const created = new Date(job.timings.created_at * 1000);
+    tr.querySelector(".job-created").textContent = created.toLocaleString(undefined, { month: "short", day: "numeric", hour: "2-digit", minute: "2-digit", second: "2-digit" });
+    tr.querySelector(".job-created").title = created.toISOString();
+    tr.querySelector(".job-size").textContent = job.width && job.height ? `${job.width}×${job.height}` : "—";
+    tr.querySelector(".job-spp").textContent = String(job.spp);
+    tr.querySelector(".job-eta").textContent = job.status === "running" && job.eta_s != null ? formatDuration(job.eta_s) : job.status === "queued" ? "queued" : "—";
     const status = tr.querySelector(".job-status");
     status.textContent = job.status + (job.error ? ` (${job.error})` : "");
     status.className = `job-status status-${job.status}`;
@@ -150,7 +190,7 @@ export class JobsPanel {
     tr.querySelector(".job-progress").value = job.progress;
     tr.querySelector(".job-percent").textContent = `${Math.round(job.progress * 100)}%`;
     const duration = jobDurationS(job);
-    tr.querySelector(".job-duration").textContent = duration == null ? "—" : `${duration.toFixed(1)} s`;
+    tr.querySelector(".job-duration").textContent = formatDuration(duration);
     const rate = samplesPerSecond(job);
     tr.querySelector(".job-rate").textContent = rate == null ? "—" : `${formatValue(rate)} samples/s`;
     // A running job can be previewed once a chunk has finished (the API merges the finished chunks).

@@ -1,5 +1,5 @@
-// Wiring of the viewer page: token entry, hash routes (#/jobs, #/view/<id>, #/compare/<a>/<b>) and the
-// three panels.
+// Wiring of the viewer page: token entry, hash routes (#/jobs, #/view/<id>, #/compare/<a>/<b>), the
+// three panels, page-level keyboard shortcuts with their `?` overlay, and drag and drop of an EXR.
 
 import { Api, loadToken, saveToken } from "./api.js";
 import { JobsPanel } from "./jobs.js";
@@ -19,6 +19,12 @@ function clearError() {
   errorBox.textContent = "";
 }
 
+/** Without a token (or with one the service refuses) the jobs page says how to get one. */
+function showTokenHelp(needed) {
+  document.querySelector("#token-help").hidden = !needed;
+  if (needed) document.querySelector("#jobs-empty").hidden = true;
+}
+
 const tokenInput = document.querySelector("#token");
 tokenInput.value = loadToken();
 document.querySelector("#token-form").addEventListener("submit", (event) => {
@@ -35,6 +41,7 @@ const jobs = new JobsPanel(document.querySelector("#jobs-panel"), api, {
 });
 const viewer = new ImageViewer(document.querySelector("#viewer-panel"), api, { onError: showError });
 let compareView = null;
+const uploadedNames = new Map(); // uploaded image id → file name
 
 async function route() {
   clearError();
@@ -46,17 +53,82 @@ async function route() {
     if (link.dataset.page === active) link.setAttribute("aria-current", "page");
     else link.removeAttribute("aria-current");
   }
-  if (active === "view" && a && a !== viewer.jobId) await viewer.open(a);
+  if (active === "view" && a && a !== viewer.jobId) {
+    const job = jobs.jobs.get(a);
+    await viewer.open(a, { label: uploadedNames.get(a) ?? (job ? jobs.label(job) : undefined) });
+  }
   if (active === "compare" && a && b) {
     compareView?.destroy();
-    compareView = await mountCompare(document.querySelector("#compare-mount"), { leftJobId: a, rightJobId: b, api });
+    compareView = await mountCompare(document.querySelector("#compare-mount"), { leftJobId: a, rightJobId: b, api, names: [a, b].map((id) => jobs.jobs.get(id) && jobs.label(jobs.jobs.get(id))) });
   }
 }
 
 async function start() {
-  await Promise.all([jobs.loadExamples(), jobs.refresh()]);
+  if (!loadToken()) {
+    showTokenHelp(true);
+    return route();
+  }
+  try {
+    await Promise.all([jobs.loadExamples(), jobs.refresh()]);
+    showTokenHelp(false);
+  } catch (error) {
+    if (error.status === 401) showTokenHelp(true);
+    throw error;
+  }
   await route();
 }
+
+// ---- keyboard: tev's keys on the image page, no click on the image needed ------------------------------
+
+const help = document.querySelector("#help");
+document.querySelector("#help-button").addEventListener("click", () => help.showModal());
+document.addEventListener("keydown", (event) => {
+  const typing = event.target.closest?.("input:not([type=checkbox]):not([type=radio]):not([type=range]), select, textarea");
+  if (typing || event.ctrlKey || event.metaKey || event.altKey) return;
+  if (event.key === "?") {
+    event.preventDefault();
+    if (help.open) help.close();
+    else help.showModal();
+    return;
+  }
+  if (help.open || document.querySelector("#viewer-panel").hidden) return;
+  if (event.target.type === "range" && event.key.startsWith("Arrow")) return; // sliders keep their arrows
+  if (viewer.handleKey(event)) event.preventDefault();
+});
+
+// ---- a spectral EXR from disk: dropped anywhere, or chosen in the file field -------------------------
+
+/** Send the file to the service (which decodes EXRs for every view) and open it. */
+async function openLocalExr(file) {
+  if (!file.name.toLowerCase().endsWith(".exr")) throw new Error(`file: ${file.name} is not an .exr file`);
+  const created = await api.json("/v1/images", { method: "POST", body: file, headers: { "Content-Type": "image/x-exr" } });
+  uploadedNames.set(created.id, file.name);
+  window.location.hash = `#/view/${created.id}`;
+}
+
+const dropOverlay = document.querySelector("#drop-overlay");
+let dragDepth = 0;
+window.addEventListener("dragenter", (event) => {
+  if (![...(event.dataTransfer?.types || [])].includes("Files")) return;
+  dragDepth += 1;
+  dropOverlay.hidden = false;
+});
+window.addEventListener("dragleave", () => {
+  dragDepth = Math.max(0, dragDepth - 1);
+  if (!dragDepth) dropOverlay.hidden = true;
+});
+window.addEventListener("dragover", (event) => event.preventDefault());
+window.addEventListener("drop", (event) => {
+  event.preventDefault();
+  dragDepth = 0;
+  dropOverlay.hidden = true;
+  const file = event.dataTransfer?.files?.[0];
+  if (file) openLocalExr(file).catch(showError);
+});
+document.querySelector("#exr-file").addEventListener("change", (event) => {
+  const file = event.target.files[0];
+  if (file) openLocalExr(file).catch(showError);
+});
 
 window.addEventListener("hashchange", () => route().catch(showError));
 start().catch(showError);

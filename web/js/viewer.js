@@ -1,13 +1,14 @@
-// Image view of one finished job: zoom/pan, exposure and tone mapping with a histogram, display modes
-// (sRGB, one spectral band in false colour, coherence diagnostics in false colour with legends),
-// coherence-ellipse overlay and the pixel inspector.
+// Image view of one finished job (or a dropped EXR): zoom/pan, exposure, offset, gamma and tone mapping
+// with a histogram, display modes (sRGB, one spectral band in false colour, coherence diagnostics in false
+// colour with legends), coherence ellipses to an absolute µm scale, a hover readout of pixel values, values
+// drawn on the pixels at high zoom (as tev), A/B markers of the pixel inspector, and downloads.
 //
 // Pixel (x, y) counts from the top-left, y down. The diagnostics' `angle` is measured from +x towards
 // image +y UP, so on screen (SVG, y down) an ellipse's ℓ₁ axis is rotated by −angle.
 
 import { autoExposureEv, displayRgb8, luminance } from "./imaging.js";
 import { drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";
-import { PixelInspector } from "./inspector.js";
+import { coherenceDisplayValue, PixelInspector, REFERENCE_WAVELENGTH_NM, saveBlob, SLOT_COLOURS } from "./inspector.js";
 
 export const DIAGNOSTIC_LAYERS = [
   ["coherence.l1_um", "ℓ₁ (coherence length, major)"],
@@ -17,40 +18,64 @@ export const DIAGNOSTIC_LAYERS = [
   ["coherence.r_m", "propagation distance r"],
   ["coherence.angle", "ℓ₁ orientation"],
 ];
-const REFERENCE_WAVELENGTH_NM = 550; // diagnostics are reported at 550 nm and scale ∝ λ
 const UNCOVERED_RGB = [40, 40, 40];
 const HISTOGRAM_BINS = 64;
 const LARGE_IMAGE_PIXELS = 1 << 20;
 const HISTOGRAM_EV_RANGE = [-12, 4];
+export const EV_SLIDER_HALF_RANGE = 12; // the slider spans auto ± 12 EV; the number box takes any EV in ±64
+const EV_STEP = 0.5; // E / Shift+E
+const VALUE_ZOOM = 48; // screen pixels per image pixel from which values are drawn on the pixels
+export const UM_PER_PX_CHOICES = [0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500, 1000];
+const MIN_SEMI_AXIS_SCREEN_PX = 1.5; // thinner ellipses are drawn this wide (said in the legend)
+const ELLIPSE_SCALE_KEY = "hgrender.ellipseUmPerPx";
+const SCALE_BAR_TARGET_PX = 100;
+const CHANNEL_TEXT_COLOURS = ["#ff9a9a", "#9aff9a", "#9ab8ff"]; // R, G, B values on the pixels (as tev)
 
 export class ImageViewer {
   constructor(root, api, { onError }) {
     this.root = root;
     this.api = api;
     this.onError = onError;
-    this.canvas = root.querySelector("#image-canvas");
-    this.overlay = root.querySelector("#ellipse-overlay");
-    this.viewport = root.querySelector("#viewport");
-    this.stage = root.querySelector("#stage");
+    const $ = (selector) => root.querySelector(selector);
+    this.canvas = $("#image-canvas");
+    this.overlay = $("#ellipse-overlay");
+    this.halo = $("#ellipse-halo");
+    this.markers = $("#marker-overlay");
+    this.valueCanvas = $("#value-canvas");
+    this.viewport = $("#viewport");
+    this.stage = $("#stage");
     this.controls = {
-      mode: root.querySelector("#display-mode"),
-      band: root.querySelector("#band-slider"),
-      bandLabel: root.querySelector("#band-label"),
-      ev: root.querySelector("#ev-slider"),
-      evLabel: root.querySelector("#ev-label"),
-      tonemap: root.querySelector("#tonemap"),
-      logScale: root.querySelector("#log-scale"),
-      ellipses: root.querySelector("#show-ellipses"),
-      spacing: root.querySelector("#ellipse-spacing"),
-      spacingLabel: root.querySelector("#ellipse-spacing-label"),
-      ellipseScale: root.querySelector("#ellipse-scale"),
+      mode: $("#display-mode"),
+      band: $("#band-slider"),
+      bandLabel: $("#band-label"),
+      ev: $("#ev-slider"),
+      evValue: $("#ev-value"),
+      evNote: $("#ev-note"),
+      offset: $("#offset"),
+      gamma: $("#gamma"),
+      transfer: $("#transfer"),
+      tonemap: $("#tonemap"),
+      logScale: $("#log-scale"),
+      ellipses: $("#show-ellipses"),
+      spacing: $("#ellipse-spacing"),
+      spacingLabel: $("#ellipse-spacing-label"),
+      ellipseScale: $("#ellipse-scale"),
     };
     this.layers = new Map(); // layer name → Float32Array (full resolution)
     this.state = { zoom: 1, panX: 0, panY: 0 };
-    this.inspector = new PixelInspector(root.querySelector("#inspector"), api, { onError });
+    this.inspector = new PixelInspector($("#inspector"), api, {
+      onError,
+      wavelengthNm: () => this.wavelengthNm(),
+      onChange: () => this.drawMarkers(),
+    });
+    const scale = this.controls.ellipseScale;
+    scale.replaceChildren(new Option("auto (fit the grid)", "auto"), ...UM_PER_PX_CHOICES.map((v) => new Option(`1 px = ${v} µm`, String(v))));
+    scale.value = window.localStorage.getItem(ELLIPSE_SCALE_KEY) || "auto";
     this.bindControls();
     this.bindPointer();
   }
+
+  // ---- controls ------------------------------------------------------------------------------------
 
   bindControls() {
     const c = this.controls;
@@ -60,25 +85,117 @@ export class ImageViewer {
       this.updateBandLabel();
       redraw();
       this.drawEllipses();
+      this.inspector.render();
     });
     c.ev.addEventListener("input", () => {
-      c.evLabel.textContent = `${Number(c.ev.value).toFixed(1)} EV`;
+      this.setExposure(Number(c.ev.value));
+      redraw();
+    });
+    c.evValue.addEventListener("change", () => {
+      this.setExposure(Number(c.evValue.value));
       redraw();
     });
     this.root.querySelector("#ev-auto").addEventListener("click", () => {
       this.setAutoExposure();
       redraw();
     });
-    c.tonemap.addEventListener("change", redraw);
-    c.logScale.addEventListener("change", redraw);
+    for (const control of [c.offset, c.gamma, c.transfer, c.tonemap, c.logScale]) control.addEventListener("change", redraw);
     c.ellipses.addEventListener("change", () => this.loadEllipses().catch((e) => this.onError(e)));
     c.spacing.addEventListener("change", () => this.loadEllipses().catch((e) => this.onError(e)));
     c.spacing.addEventListener("input", () => (c.spacingLabel.textContent = `${c.spacing.value} px`));
-    c.ellipseScale.addEventListener("change", () => this.drawEllipses());
+    c.ellipseScale.addEventListener("change", () => {
+      window.localStorage.setItem(ELLIPSE_SCALE_KEY, c.ellipseScale.value);
+      this.drawEllipses();
+    });
     this.root.querySelector("#zoom-in").addEventListener("click", () => this.zoomBy(1.5));
     this.root.querySelector("#zoom-out").addEventListener("click", () => this.zoomBy(1 / 1.5));
     this.root.querySelector("#zoom-fit").addEventListener("click", () => this.fit());
+    this.root.querySelector("#download-png").addEventListener("click", () => this.downloadPng());
+    this.root.querySelector("#download-exr").addEventListener("click", () => this.download(`/v1/jobs/${this.jobId}/artifacts/image.exr`, `${this.jobId}.exr`));
+    this.root.querySelector("#download-diagnostics").addEventListener("click", () => this.download(`/v1/jobs/${this.jobId}/diagnostics.exr`, `${this.jobId}_diagnostics.exr`));
   }
+
+  /**
+   * The keyboard shortcuts (tev's where they apply), handled at the page level so that they work without
+   * clicking the image first. Returns true when `event` was one of them.
+   */
+  handleKey(event) {
+    if (!this.catalogue) return false;
+    const c = this.controls;
+    const redraw = () => this.draw().catch((e) => this.onError(e));
+    const pan = 40;
+    const shift = event.shiftKey;
+    const key = event.key.length === 1 ? event.key.toLowerCase() : event.key;
+    const actions = {
+      e: () => (this.setExposure(this.exposureEv() + (shift ? -EV_STEP : EV_STEP)), redraw()),
+      o: () => ((c.offset.value = String(Number(c.offset.value) + (shift ? -0.1 : 0.1)).slice(0, 8)), redraw()),
+      g: () => ((c.gamma.value = String(Math.max(0.1, Number(c.gamma.value) + (shift ? -0.1 : 0.1)).toFixed(2))), (c.transfer.value = "gamma"), redraw()),
+      n: () => (shift ? this.resetDisplay() : this.setAutoExposure(), redraw()),
+      f: () => this.fit(),
+      0: () => this.fit(),
+      "+": () => this.zoomBy(1.5),
+      "=": () => this.zoomBy(1.5),
+      "-": () => this.zoomBy(1 / 1.5),
+      l: () => ((c.logScale.checked = !c.logScale.checked), redraw()),
+      c: () => ((c.ellipses.checked = !c.ellipses.checked), this.loadEllipses().catch((e) => this.onError(e))),
+      ArrowLeft: () => this.panBy(pan, 0),
+      ArrowRight: () => this.panBy(-pan, 0),
+      ArrowUp: () => this.panBy(0, pan),
+      ArrowDown: () => this.panBy(0, -pan),
+    };
+    if (/^[1-9]$/.test(event.key)) {
+      const option = c.mode.options[Number(event.key) - 1];
+      if (!option) return false;
+      c.mode.value = option.value;
+      redraw();
+      return true;
+    }
+    if (!actions[key]) return false;
+    actions[key]();
+    return true;
+  }
+
+  exposureEv() {
+    return this.ev ?? 0;
+  }
+
+  /**
+   * Set the exposure (any EV in ±64). The slider spans the automatic exposure ± 12 EV; beyond it the
+   * slider rests at its end and the note says that the box holds the value.
+   */
+  setExposure(ev) {
+    const c = this.controls;
+    const value = Math.min(Math.max(Number.isFinite(ev) ? ev : 0, -64), 64);
+    this.ev = value; // exact (the automatic exposure is not rounded); the box shows 2 decimals
+    c.evValue.value = value.toFixed(2);
+    const [lo, hi] = [Number(c.ev.min), Number(c.ev.max)];
+    c.ev.value = String(Math.min(Math.max(value, lo), hi));
+    const outside = value < lo || value > hi;
+    c.evNote.textContent = outside
+      ? `clamped: the slider ends at ${value < lo ? lo : hi} EV; the exposure is ${value.toFixed(2)} EV (box)`
+      : `auto ${this.autoEv.toFixed(2)} EV`;
+    c.evNote.classList.toggle("warning", outside);
+    c.ev.setAttribute("aria-valuetext", `${value.toFixed(1)} EV`);
+  }
+
+  /** The automatic exposure: the server's (99th luminance percentile → white, as regression runs use). */
+  setAutoExposure() {
+    this.setExposure(this.autoEv);
+  }
+
+  resetDisplay() {
+    this.controls.offset.value = "0";
+    this.controls.gamma.value = "2.2";
+    this.controls.transfer.value = "srgb";
+    this.setExposure(0);
+  }
+
+  displayOptions() {
+    const c = this.controls;
+    return { offset: Number(c.offset.value) || 0, gamma: c.transfer.value === "gamma" ? Number(c.gamma.value) || 2.2 : null };
+  }
+
+  // ---- pointer, zoom and pan -------------------------------------------------------------------------
 
   bindPointer() {
     const vp = this.viewport;
@@ -88,6 +205,7 @@ export class ImageViewer {
       vp.setPointerCapture(event.pointerId);
     });
     vp.addEventListener("pointermove", (event) => {
+      this.showHover(event.clientX, event.clientY);
       if (!drag) return;
       const dx = event.clientX - drag.x;
       const dy = event.clientY - drag.y;
@@ -105,6 +223,7 @@ export class ImageViewer {
       const pixel = this.pixelAt(event.clientX, event.clientY);
       if (pixel) this.inspector.inspect(this.jobId, pixel.x, pixel.y).catch((e) => this.onError(e));
     });
+    vp.addEventListener("pointerleave", () => (this.root.querySelector("#hover-readout").textContent = ""));
     vp.addEventListener(
       "wheel",
       (event) => {
@@ -114,24 +233,6 @@ export class ImageViewer {
       },
       { passive: false },
     );
-    vp.addEventListener("keydown", (event) => {
-      const step = 40;
-      const actions = {
-        ArrowLeft: () => (this.state.panX += step),
-        ArrowRight: () => (this.state.panX -= step),
-        ArrowUp: () => (this.state.panY += step),
-        ArrowDown: () => (this.state.panY -= step),
-        "+": () => this.zoomBy(1.5),
-        "=": () => this.zoomBy(1.5),
-        "-": () => this.zoomBy(1 / 1.5),
-        0: () => this.fit(),
-      };
-      if (actions[event.key]) {
-        event.preventDefault();
-        actions[event.key]();
-        this.applyTransform();
-      }
-    });
     this.overlay.addEventListener("pointerover", (event) => {
       const target = event.target.closest("ellipse");
       if (target) this.showEllipseInfo(target);
@@ -144,6 +245,12 @@ export class ImageViewer {
     const x = Math.floor(((clientX - rect.left) / rect.width) * this.canvas.width);
     const y = Math.floor(((clientY - rect.top) / rect.height) * this.canvas.height);
     return x >= 0 && y >= 0 && x < this.canvas.width && y < this.canvas.height ? { x, y } : null;
+  }
+
+  panBy(dx, dy) {
+    this.state.panX += dx;
+    this.state.panY += dy;
+    this.applyTransform();
   }
 
   zoomBy(factor, cx = this.viewport.clientWidth / 2, cy = this.viewport.clientHeight / 2) {
@@ -168,24 +275,65 @@ export class ImageViewer {
   applyTransform() {
     const { zoom, panX, panY } = this.state;
     this.stage.style.transform = `translate(${panX}px, ${panY}px) scale(${zoom})`;
-    // Strokes are in image pixels (the overlay is scaled with the image): keep them 1.5 screen pixels.
+    // Strokes are in image pixels (the overlays are scaled with the image): keep them 1.5 screen pixels.
     this.overlay.style.strokeWidth = String(1.5 / zoom);
+    // White outlines over a halo (a black copy of each ellipse under it, 1 screen px wider on each side)
+    // stay visible on white, black and false-colour images alike.
+    this.halo.style.strokeWidth = String(3.5 / zoom);
+    this.markers.style.strokeWidth = String(2 / zoom);
     this.root.querySelector("#zoom-label").textContent = `${Math.round(zoom * 100)}%`;
+    if (this.ellipses?.length) this.drawEllipses(); // the thinnest axes keep a visible screen width
+    this.drawScaleBar();
+    this.drawPixelValues();
   }
 
-  /** Load a job's catalogue and RGB; reset the controls that depend on the image. */
-  async open(jobId) {
+  // ---- opening an image ------------------------------------------------------------------------------
+
+  /** Show that there is no image (wrong id, job without an image): nothing of the previous one stays. */
+  clear(title) {
+    this.jobId = null;
+    this.catalogue = null;
+    this.layers.clear();
+    this.ellipses = [];
+    this.canvas.width = 1;
+    this.canvas.height = 1;
+    this.canvas.getContext("2d").clearRect(0, 0, 1, 1);
+    for (const node of [this.overlay, this.halo, this.markers, this.root.querySelector("#legend"), this.root.querySelector("#ellipse-legend")]) node.replaceChildren();
+    this.valueCanvas.getContext("2d").clearRect(0, 0, this.valueCanvas.width, this.valueCanvas.height);
+    this.root.querySelector("#scale-bar").hidden = true;
+    this.root.querySelector("#viewer-title").textContent = title;
+    this.root.querySelector("#viewer-size").textContent = "";
+    this.root.querySelector("#viewer-hint").hidden = false;
+    this.root.querySelector("#downloads").hidden = true;
+    this.inspector.reset({ job_id: "", layers: [], width: 1, height: 1 });
+    delete this.canvas.dataset.mode;
+  }
+
+  /** Load a job's (or an uploaded image's) catalogue and RGB; reset the controls that depend on it. */
+  async open(jobId, { label } = {}) {
+    if (!/^[0-9a-f]{32}$/.test(jobId)) {
+      this.clear("No such job");
+      throw new Error(`no such job: ${jobId} (job ids are 32 hexadecimal digits)`);
+    }
     this.jobId = jobId;
     this.layers.clear();
-    this.catalogue = await this.api.json(`/v1/jobs/${jobId}/layers`);
+    try {
+      this.catalogue = await this.api.json(`/v1/jobs/${jobId}/layers`);
+    } catch (error) {
+      this.clear(error.status === 404 ? "No such job" : `Job ${jobId}`);
+      if (error.status === 404) throw new Error(`no such job: ${jobId}`);
+      throw error;
+    }
     const { width, height } = this.catalogue;
     this.canvas.width = width;
     this.canvas.height = height;
     this.stage.style.width = `${width}px`;
     this.stage.style.height = `${height}px`;
-    this.overlay.setAttribute("viewBox", `0 0 ${width} ${height}`);
-    this.overlay.setAttribute("width", width);
-    this.overlay.setAttribute("height", height);
+    for (const svg of [this.overlay, this.halo, this.markers]) {
+      svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
+      svg.setAttribute("width", width);
+      svg.setAttribute("height", height);
+    }
     this.info = new Map(this.catalogue.layers.map((layer) => [layer.name, layer]));
     this.bandNames = this.catalogue.layers.filter((l) => l.kind === "band").map((l) => l.name);
     const band = this.controls.band;
@@ -193,12 +341,24 @@ export class ImageViewer {
     band.value = String(Math.floor(this.bandNames.length / 2));
     this.updateBandLabel();
     const mode = this.controls.mode;
-    mode.replaceChildren(new Option("sRGB (from the spectrum)", "srgb"), new Option("single band (false colour)", "band"));
-    for (const [name, label] of DIAGNOSTIC_LAYERS) if (this.info.has(name)) mode.append(new Option(label, name));
-    this.root.querySelector("#viewer-title").textContent = `Job ${jobId}`;
+    mode.replaceChildren(new Option("1 · sRGB (from the spectrum)", "srgb"), new Option("2 · single band (false colour)", "band"));
+    for (const [name, text] of DIAGNOSTIC_LAYERS) if (this.info.has(name)) mode.append(new Option(`${mode.options.length + 1} · ${text}`, name));
+    const uploaded = this.catalogue.uploaded;
+    this.root.querySelector("#viewer-title").textContent = uploaded ? `Local file ${label || ""}`.trim() : `Job ${label || jobId}`;
     this.root.querySelector("#viewer-hint").hidden = true;
     const partial = this.catalogue.partial ? " — preview of the chunks finished so far (job running; reopen to refresh)" : "";
-    this.root.querySelector("#viewer-size").textContent = `${width}×${height} px, ${this.bandNames.length} bands${partial}`;
+    const source = uploaded ? " — dropped EXR, held in the service's memory (not stored)" : "";
+    this.root.querySelector("#viewer-size").textContent = `${width}×${height} px, ${this.bandNames.length} bands${partial}${source}`;
+    this.root.querySelector("#downloads").hidden = false;
+    const exr = this.root.querySelector("#download-exr");
+    exr.disabled = uploaded || this.catalogue.partial;
+    exr.title = exr.disabled ? "the spectral EXR exists once the job has finished (a dropped file is already on your disk)" : "";
+    this.root.querySelector("#download-diagnostics").disabled = !this.info.has("coherence.weight");
+    // The slider is centred on this image's automatic exposure, so it always holds it.
+    this.autoEv = this.catalogue.exposure_ev ?? autoExposureEv(await this.layer("rgb"));
+    const centre = Math.round(this.autoEv);
+    this.controls.ev.min = String(centre - EV_SLIDER_HALF_RANGE);
+    this.controls.ev.max = String(centre + EV_SLIDER_HALF_RANGE);
     await this.layer("rgb");
     this.setAutoExposure();
     this.fit();
@@ -218,17 +378,8 @@ export class ImageViewer {
     return this.layers.get(name);
   }
 
-  /** Exposure that maps the 99th percentile of luminance to white, on the slider's 0.5 EV steps. */
-  setAutoExposure() {
-    const slider = this.controls.ev;
-    const ev = Math.round(autoExposureEv(this.layers.get("rgb")) / Number(slider.step)) * Number(slider.step);
-    slider.value = String(Math.min(Math.max(ev, Number(slider.min)), Number(slider.max)));
-    this.controls.evLabel.textContent = `${Number(slider.value).toFixed(1)} EV`;
-  }
-
   updateBandLabel() {
-    const name = this.bandNames?.[Number(this.controls.band.value)];
-    const nm = name ? this.info.get(name).wavelength_nm : REFERENCE_WAVELENGTH_NM;
+    const nm = this.wavelengthNm();
     this.controls.bandLabel.textContent = `${nm.toFixed(1)} nm`;
     this.controls.band.setAttribute("aria-valuetext", `${nm.toFixed(1)} nanometres`);
   }
@@ -239,26 +390,38 @@ export class ImageViewer {
     return name ? this.info.get(name).wavelength_nm : REFERENCE_WAVELENGTH_NM;
   }
 
+  /** The layer shown now: name, values, unit and channel count (rgb: 3). */
+  currentLayer() {
+    const mode = this.controls.mode.value;
+    if (mode === "srgb") return { name: "rgb", unit: this.info.get("rgb")?.unit ?? "", channels: 3 };
+    const name = mode === "band" ? this.bandNames[Number(this.controls.band.value)] : mode;
+    return { name, unit: this.info.get(name).unit, channels: 1 };
+  }
+
+  // ---- drawing -------------------------------------------------------------------------------------
+
   /** Render the current mode into the canvas (one canvas pixel per image pixel). */
   async draw() {
     if (!this.catalogue) return;
     const { width, height } = this.catalogue;
     const mode = this.controls.mode.value;
-    const ev = Number(this.controls.ev.value);
+    const ev = this.exposureEv();
     const operator = this.controls.tonemap.value;
     const image = new ImageData(width, height);
     const legend = this.root.querySelector("#legend");
     const isSrgb = mode === "srgb";
-    this.controls.tonemap.disabled = !isSrgb;
-    this.controls.ev.disabled = !isSrgb;
+    for (const control of ["tonemap", "ev", "evValue", "offset", "gamma", "transfer"]) this.controls[control].disabled = !isSrgb;
     this.controls.logScale.disabled = isSrgb;
     let histogramValues;
     if (isSrgb) {
       const rgb = await this.layer("rgb");
-      displayRgb8(rgb, image.data, ev, operator);
+      const options = this.displayOptions();
+      displayRgb8(rgb, image.data, ev, operator, options);
       const scale = Math.pow(2, ev);
       histogramValues = Array.from(luminance(rgb), (y) => (y > 0 ? Math.log2(y * scale) : -Infinity));
       legend.replaceChildren();
+      const transfer = options.gamma ? `gamma ${options.gamma}` : "sRGB curve";
+      legend.textContent = `sRGB display: ${ev.toFixed(1)} EV, offset ${options.offset}, ${operator}, ${transfer}`;
       this.drawHistogram(histogramValues, HISTOGRAM_EV_RANGE, "log₂ luminance (EV, 0 = white)");
     } else {
       const name = mode === "band" ? this.bandNames[Number(this.controls.band.value)] : mode;
@@ -275,13 +438,15 @@ export class ImageViewer {
         image.data[4 * i + 2] = rgb[2];
         image.data[4 * i + 3] = 255;
       }
-      const title = mode === "band" ? `band ${info.wavelength_nm.toFixed(1)} nm` : this.controls.mode.selectedOptions[0].textContent;
+      const title = mode === "band" ? `band ${info.wavelength_nm.toFixed(1)} nm` : this.controls.mode.selectedOptions[0].textContent.replace(/^\d · /, "");
       drawColourBar(legend, scale, info.unit, title);
       this.drawHistogram(histogramValues, [0, 1], "colour-bar position");
     }
     this.canvas.getContext("2d").putImageData(image, 0, 0);
     this.canvas.dataset.mode = mode;
+    this.canvas.dataset.ev = String(ev);
     this.canvas.setAttribute("aria-label", `rendered image: ${this.controls.mode.selectedOptions[0]?.textContent ?? mode}`);
+    this.drawPixelValues();
     this.canvas.dataset.drawn = String((Number(this.canvas.dataset.drawn) || 0) + 1);
   }
 
@@ -310,6 +475,93 @@ export class ImageViewer {
     this.root.querySelector("#histogram-label").textContent = `${label}: ${lo} … ${hi}`;
   }
 
+  /** The value(s) of the shown layer at pixel (x, y) as text (RGB: three values). */
+  valueText(x, y, withUnit = true) {
+    const layer = this.currentLayer();
+    const data = this.layers.get(layer.name);
+    if (!data) return "";
+    const i = y * this.catalogue.width + x;
+    const unit = withUnit ? layer.unit : "";
+    if (layer.channels === 3) return [0, 1, 2].map((c) => formatValue(data[3 * i + c])).join(" ") + (unit ? ` ${unit}` : "");
+    const weight = this.layers.get("coherence.weight");
+    if (layer.name.startsWith("coherence.") && weight && !(weight[i] > 0)) return "no diagnostics";
+    return formatValue(data[i], unit);
+  }
+
+  showHover(clientX, clientY) {
+    const readout = this.root.querySelector("#hover-readout");
+    const pixel = this.catalogue && this.pixelAt(clientX, clientY);
+    if (!pixel) {
+      readout.textContent = "";
+      return;
+    }
+    const layer = this.currentLayer();
+    const name = layer.name === "rgb" ? "linear R G B" : layer.name;
+    readout.textContent = `(${pixel.x}, ${pixel.y}) ${name}: ${this.valueText(pixel.x, pixel.y)}`;
+    readout.dataset.x = String(pixel.x);
+    readout.dataset.y = String(pixel.y);
+  }
+
+  /** At ≥ 48 screen px per image pixel, each visible pixel shows its value (as tev does). */
+  drawPixelValues() {
+    const canvas = this.valueCanvas;
+    const { clientWidth: w, clientHeight: h } = this.viewport;
+    if (canvas.width !== w || canvas.height !== h) [canvas.width, canvas.height] = [w, h];
+    const ctx = canvas.getContext("2d");
+    ctx.clearRect(0, 0, w, h);
+    const { zoom, panX, panY } = this.state;
+    canvas.dataset.values = "0";
+    if (!this.catalogue || zoom < VALUE_ZOOM) return;
+    const layer = this.currentLayer();
+    const data = this.layers.get(layer.name);
+    if (!data) return;
+    const [x0, x1] = [Math.max(0, Math.floor(-panX / zoom)), Math.min(this.catalogue.width, Math.ceil((w - panX) / zoom))];
+    const [y0, y1] = [Math.max(0, Math.floor(-panY / zoom)), Math.min(this.catalogue.height, Math.ceil((h - panY) / zoom))];
+    ctx.font = `${Math.min(13, zoom / 5)}px ui-monospace, monospace`;
+    ctx.textAlign = "center";
+    ctx.textBaseline = "middle";
+    ctx.lineWidth = 3;
+    ctx.strokeStyle = "rgba(0, 0, 0, 0.8)";
+    ctx.fillStyle = "#fff";
+    let drawn = 0;
+    for (let y = y0; y < y1; y++) {
+      for (let x = x0; x < x1; x++) {
+        const cx = panX + (x + 0.5) * zoom;
+        const cy = panY + (y + 0.5) * zoom;
+        const lines = layer.channels === 3 ? this.valueText(x, y, false).split(" ") : [this.valueText(x, y, false)];
+        lines.forEach((text, k) => {
+          const ty = cy + (k - (lines.length - 1) / 2) * Math.min(14, zoom / 4);
+          ctx.fillStyle = lines.length === 3 ? CHANNEL_TEXT_COLOURS[k] : "#fff";
+          ctx.strokeText(text, cx, ty);
+          ctx.fillText(text, cx, ty);
+        });
+        drawn += 1;
+      }
+    }
+    canvas.dataset.values = String(drawn);
+  }
+
+  /** A and B of the pixel inspector: a square around the pixel and its letter, in the slot's colour. */
+  drawMarkers() {
+    this.markers.replaceChildren();
+    const ns = "http://www.w3.org/2000/svg";
+    for (const [slot, pixel] of Object.entries(this.inspector.pixels)) {
+      if (!pixel) continue;
+      const group = document.createElementNS(ns, "g");
+      group.dataset.slot = slot;
+      group.setAttribute("class", "marker");
+      const square = document.createElementNS(ns, "rect");
+      Object.entries({ x: pixel.x, y: pixel.y, width: 1, height: 1, fill: "none", stroke: SLOT_COLOURS[slot] }).forEach(([k, v]) => square.setAttribute(k, v));
+      const letter = document.createElementNS(ns, "text");
+      Object.entries({ x: pixel.x + 1.2, y: pixel.y + 0.2, fill: SLOT_COLOURS[slot], "font-size": Math.max(1.2, 14 / this.state.zoom), "dominant-baseline": "hanging" }).forEach(([k, v]) => letter.setAttribute(k, v));
+      letter.textContent = slot;
+      group.append(square, letter);
+      this.markers.append(group);
+    }
+  }
+
+  // ---- coherence ellipses ----------------------------------------------------------------------------
+
   async loadEllipses() {
     this.ellipses = [];
     if (this.jobId && this.controls.ellipses.checked) {
@@ -319,25 +571,42 @@ export class ImageViewer {
     this.drawEllipses();
   }
 
-  /** Ellipses: semi-axes ∝ ℓ₁, ℓ₂ (linear or log scale), rotated by −angle on screen, coloured by area. */
+  /**
+   * µm per image pixel of the ellipses: the chosen fixed value (kept across jobs, so they compare), or
+   * "auto": the 1-2-5 value at which the median ℓ₁ at 550 nm is 0.45 of the grid spacing.
+   */
+  umPerPx() {
+    const chosen = this.controls.ellipseScale.value;
+    if (chosen !== "auto") return Number(chosen);
+    const l1 = this.ellipses.map((e) => e.l1_um).sort((a, b) => a - b);
+    const target = l1[Math.floor(l1.length / 2)] / (0.45 * Number(this.controls.spacing.value));
+    return UM_PER_PX_CHOICES.find((v) => v >= target) ?? UM_PER_PX_CHOICES[UM_PER_PX_CHOICES.length - 1];
+  }
+
+  /** Ellipses: semi-axes ℓ₁(λ), ℓ₂(λ) in µm at the slider's λ, drawn at `umPerPx`; rotated by −angle. */
   drawEllipses() {
     this.overlay.replaceChildren();
+    this.halo.replaceChildren();
     const legend = this.root.querySelector("#ellipse-legend");
     legend.replaceChildren();
     const grid = this.ellipses || [];
+    this.root.querySelector("#scale-bar").hidden = !grid.length;
+    this.overlay.dataset.count = String(grid.length);
     if (!grid.length) return;
-    const spacing = Number(this.controls.spacing.value);
-    const radiusPx = 0.45 * spacing;
-    const l1Max = Math.max(...grid.map((e) => e.l1_um));
-    const l2Min = Math.min(...grid.map((e) => e.l2_um));
-    const logScale = this.controls.ellipseScale.value === "log";
-    const decades = Math.log10(l1Max / l2Min) + 0.3; // +0.3: the shortest axis keeps a visible length
-    const radius = (l) => Math.max(logScale ? (radiusPx * (Math.log10(l / l2Min) + 0.3)) / decades : (radiusPx * l) / l1Max, 0.25);
+    const nm = this.wavelengthNm();
+    const lambdaFactor = nm / REFERENCE_WAVELENGTH_NM;
+    const umPerPx = this.umPerPx();
+    this.overlay.dataset.umPerPx = String(umPerPx);
+    const minRadius = MIN_SEMI_AXIS_SCREEN_PX / this.state.zoom;
+    const radius = (lengthUm) => Math.max((lengthUm * lambdaFactor) / umPerPx, minRadius);
     const areas = grid.map((e) => e.area_um2);
     const areaScale = makeScale(Math.min(...areas), Math.max(...areas), true);
-    const lambdaFactor = this.wavelengthNm() / REFERENCE_WAVELENGTH_NM;
     const legendScale = makeScale(areaScale.lo * lambdaFactor ** 2, areaScale.hi * lambdaFactor ** 2, true);
-    drawColourBar(legend, legendScale, "µm²", `ellipse colour: coherence area at ${this.wavelengthNm().toFixed(0)} nm`);
+    drawColourBar(legend, legendScale, "µm²", `ellipse fill: coherence area at ${nm.toFixed(0)} nm`);
+    const note = document.createElement("p");
+    note.className = "small ellipse-scale-note";
+    note.textContent = `Ellipses: ℓ₁, ℓ₂ at λ = ${nm.toFixed(0)} nm (wavelength slider; reported at 550 nm, ∝ λ), 1 image px = ${umPerPx} µm; semi-axes under ${MIN_SEMI_AXIS_SCREEN_PX} screen px drawn at ${MIN_SEMI_AXIS_SCREEN_PX} px.`;
+    legend.append(note);
     const ns = "http://www.w3.org/2000/svg";
     for (const e of grid) {
       const cx = e.x + 0.5;
@@ -349,9 +618,7 @@ export class ImageViewer {
       shape.setAttribute("rx", radius(e.l1_um));
       shape.setAttribute("ry", radius(e.l2_um));
       shape.setAttribute("transform", `rotate(${(-e.angle * 180) / Math.PI} ${cx} ${cy})`);
-      shape.setAttribute("stroke", `rgb(${r},${g},${b})`);
       shape.setAttribute("fill", `rgb(${r},${g},${b})`);
-      shape.setAttribute("fill-opacity", "0.2");
       Object.assign(shape.dataset, {
         x: e.x,
         y: e.y,
@@ -360,21 +627,56 @@ export class ImageViewer {
         angle: e.angle,
         areaUm2: e.area_um2 * lambdaFactor * lambdaFactor,
       });
+      const halo = shape.cloneNode();
+      for (const attribute of ["fill", "stroke"]) halo.removeAttribute(attribute);
+      this.halo.append(halo);
       const title = document.createElementNS(ns, "title");
-      title.textContent = ellipseText(shape.dataset, this.wavelengthNm());
+      title.textContent = ellipseText(shape.dataset, nm);
       shape.append(title);
       this.overlay.append(shape);
     }
-    this.overlay.dataset.count = String(grid.length);
+    this.drawScaleBar();
+  }
+
+  /** A bar of a round number of µm, on screen at the ellipses' scale and the current zoom. */
+  drawScaleBar() {
+    const bar = this.root.querySelector("#scale-bar");
+    if (!this.ellipses?.length) return;
+    const screenPxPerUm = this.state.zoom / this.umPerPx();
+    const target = SCALE_BAR_TARGET_PX / screenPxPerUm;
+    const power = Math.pow(10, Math.floor(Math.log10(target)));
+    const lengthUm = [5, 2, 1].map((m) => m * power).find((v) => v <= target) ?? power;
+    bar.querySelector(".scale-bar-line").style.width = `${lengthUm * screenPxPerUm}px`;
+    bar.querySelector(".scale-bar-label").textContent = `${formatValue(lengthUm, "µm")} (ellipses at ${this.wavelengthNm().toFixed(0)} nm)`;
+    bar.dataset.lengthUm = String(lengthUm);
+    bar.dataset.widthPx = String(lengthUm * screenPxPerUm);
   }
 
   showEllipseInfo(shape) {
     this.root.querySelector("#ellipse-info").textContent = ellipseText(shape.dataset, this.wavelengthNm());
   }
+
+  // ---- downloads -------------------------------------------------------------------------------------
+
+  /** The canvas as shown (mode, exposure, tone map, offset, gamma), one PNG pixel per image pixel. */
+  downloadPng() {
+    const mode = this.controls.mode.value.replace(/[^A-Za-z0-9_.-]/g, "_");
+    this.canvas.toBlob((blob) => saveBlob(blob, `${this.jobId}_${mode}.png`), "image/png");
+  }
+
+  /** An authenticated download (the token is a header, so a plain link cannot carry it). */
+  async download(path, filename) {
+    try {
+      const response = await this.api.request(path);
+      saveBlob(await response.blob(), filename);
+    } catch (error) {
+      this.onError(error);
+    }
+  }
 }
 
-function ellipseText(d, wavelengthNm) {
-  const degrees = (Number(d.angle) * 180) / Math.PI;
+export function ellipseText(d, wavelengthNm) {
+  const degrees = coherenceDisplayValue("angle", Number(d.angle), wavelengthNm);
   return (
     `pixel (${d.x}, ${d.y}) at ${wavelengthNm.toFixed(0)} nm: ℓ₁ ${formatValue(Number(d.l1Um), "µm")}, ` +
     `ℓ₂ ${formatValue(Number(d.l2Um), "µm")}, angle ${degrees.toFixed(1)}°, area ${formatValue(Number(d.areaUm2), "µm²")}`

@@ -1,19 +1,23 @@
 // Regression dashboard: schedules (create, pause/resume, run now, delete), a schedule's runs with the
-// trend of ΔE₀₀ p95 per scene (GET /v1/schedules/{id}/runs → series), and a failing scene's baseline job
-// against its current job in the viewer's compare view (web/js/compare.js).
+// trend per scene of a verdict's quantity and its threshold (GET /v1/schedules/{id}/runs → series), and a
+// scene's baseline job against its current job in the viewer's compare view (web/js/compare.js), opened
+// at the exposure the run used, so its ΔE₀₀ is the run's.
 
 import { Api, loadToken, saveToken } from "/web/js/api.js";
 import { mountCompare } from "/web/js/compare.js";
+import { formatValue } from "/web/js/colormap.js";
+import { drawPlot } from "/web/js/plot.js";
 
 const api = new Api();
 const PALETTE = ["#8ab4f8", "#fdd663", "#81c995", "#f28b82", "#c58af9", "#78d9ec", "#fcad70", "#ff8bcb"];
-const SVG_NS = "http://www.w3.org/2000/svg";
 let selectedScheduleId = null;
 let compareView = null;
 
 function showError(error) {
   const box = document.getElementById("error");
-  box.textContent = error ? String(error.message || error) : "";
+  const noToken = !loadToken() || error?.status === 401;
+  const hint = noToken ? " — paste an API token above: `hgrender serve` wrote one to <data dir>/admin.token (see the Jobs page)" : "";
+  box.textContent = error ? String(error.message || error) + hint : "";
   box.hidden = !error;
 }
 
@@ -88,70 +92,64 @@ async function createSchedule(event) {
   await selectSchedule(created.id);
 }
 
-function svg(tag, attributes, parent) {
-  const element = document.createElementNS(SVG_NS, tag);
-  for (const [key, value] of Object.entries(attributes)) element.setAttribute(key, value);
-  parent.append(element);
-  return element;
-}
+// The trend plot shows what a verdict tests: each metric with the threshold it is compared against.
+export const TREND_METRICS = {
+  delta_e00_p95_excess: { label: "ΔE₀₀ p95 above noise", threshold: "max_delta_e00_p95", unit: "" },
+  flip_mean_excess: { label: "ꟻLIP mean above noise", threshold: "max_flip_mean", unit: "" },
+  rel_rmse_max: { label: "worst band rel. RMSE (noise-corrected)", threshold: "max_rel_rmse", unit: "" },
+};
+let trendState = null;
 
-/** Points (time, ΔE₀₀ p95) per scene, one colour each; a failed run's point is a ring. */
-function drawTrend(series, thresholdP95) {
+/** Points (time, metric) per scene, one colour each, a failed run's point is a ring; threshold dashed. */
+function drawTrend() {
+  if (!trendState) return;
+  const { series, thresholds } = trendState;
+  const key = document.getElementById("trend-metric").value;
+  const metric = TREND_METRICS[key];
   const plot = document.getElementById("trend");
-  plot.replaceChildren();
-  const [width, height, left, bottom, top] = [720, 240, 48, 24, 10];
-  const points = Object.values(series).flat().filter((p) => p.delta_e00_p95 !== null);
-  const legend = document.getElementById("trend-legend");
-  legend.replaceChildren();
-  if (!points.length) {
-    svg("text", { x: left, y: height / 2 }, plot).textContent = "no compared runs yet";
+  const entries = Object.entries(series).map(([scene, points], index) => ({ scene, colour: PALETTE[index % PALETTE.length], points: points.filter((p) => p[key] != null) }));
+  const threshold = thresholds[metric.threshold];
+  document.getElementById("trend-caption").textContent =
+    `${metric.label} per scene over runs — the quantity the verdict compares with ${metric.threshold} = ${threshold} (dashed); filled: pass, ring: fail`;
+  plot.dataset.metric = key;
+  if (!entries.some((e) => e.points.length)) {
+    plot.replaceChildren();
+    document.getElementById("trend-legend").replaceChildren();
+    const text = document.createElementNS("http://www.w3.org/2000/svg", "text");
+    text.setAttribute("x", 60);
+    text.setAttribute("y", 120);
+    text.textContent = "no compared runs yet";
+    plot.append(text);
     return;
   }
-  const times = points.map((p) => p.at);
-  const [t0, t1] = [Math.min(...times), Math.max(...times)];
-  const yMax = Math.max(thresholdP95 ?? 0, ...points.map((p) => p.delta_e00_p95)) * 1.1 || 1;
-  const x = (t) => left + ((t - t0) / (t1 - t0 || 1)) * (width - left - 10);
-  const y = (v) => height - bottom - (v / yMax) * (height - bottom - top);
-  svg("line", { class: "axis", x1: left, y1: height - bottom, x2: width - 10, y2: height - bottom }, plot);
-  svg("line", { class: "axis", x1: left, y1: top, x2: left, y2: height - bottom }, plot);
-  for (const v of [0, yMax / 2, yMax]) {
-    svg("text", { x: 4, y: y(v) + 4 }, plot).textContent = v.toFixed(1);
-  }
-  svg("text", { x: left, y: height - 6 }, plot).textContent = formatTime(t0);
-  svg("text", { x: width - 160, y: height - 6 }, plot).textContent = formatTime(t1);
-  if (thresholdP95 !== undefined) {
-    svg("line", { class: "threshold", x1: left, x2: width - 10, y1: y(thresholdP95), y2: y(thresholdP95) }, plot);
-  }
-  Object.entries(series).forEach(([scene, entries], index) => {
-    const colour = PALETTE[index % PALETTE.length];
-    const compared = entries.filter((p) => p.delta_e00_p95 !== null);
-    if (compared.length > 1) {
-      const path = compared.map((p) => `${x(p.at).toFixed(1)},${y(p.delta_e00_p95).toFixed(1)}`).join(" ");
-      svg("polyline", { points: path, fill: "none", stroke: colour, "stroke-width": 1.5 }, plot);
-    }
-    for (const p of compared) {
-      const failed = p.verdict !== "pass";
-      const dot = svg("circle", { cx: x(p.at), cy: y(p.delta_e00_p95), r: 4, stroke: colour, "stroke-width": 2, fill: failed ? "none" : colour }, plot);
-      svg("title", {}, dot).textContent = `${scene}: ΔE₀₀ p95 ${p.delta_e00_p95.toFixed(3)} (${p.verdict})`;
-    }
-    const key = document.createElement("span");
-    key.style.color = colour;
-    key.textContent = `● ${scene}  `;
-    legend.append(key);
+  drawPlot(plot, {
+    series: entries.map((e) => ({ id: e.scene, name: e.scene, colour: e.colour, points: e.points.map((p) => [p.at, p[key]]), hollow: (i) => e.points[i].verdict !== "pass" })),
+    x: { label: "run started", format: (t) => new Date(t * 1000).toLocaleTimeString() },
+    y: { label: metric.label, unit: metric.unit, min: 0 },
+    lines: [{ y: threshold, label: `threshold ${metric.threshold} = ${threshold}` }],
+    legend: document.getElementById("trend-legend"),
+    readout: document.getElementById("trend-readout"),
+    readoutText: (t, hits) => `${formatTime(t)}: ${hits.map((h) => `${h.name} ${formatValue(h.point[1])}`).join(", ")}`,
   });
 }
 
-async function showCompare(scene, baselineJobId, currentJobId) {
+async function showCompare(scene, result) {
   const section = document.getElementById("compare-section");
   section.hidden = false;
+  const stored = result.metrics?.delta_e00 || {};
+  const flip = result.metrics?.flip || {};
   document.getElementById("compare-caption").textContent =
-    `${scene}: baseline job ${baselineJobId} (left) vs current job ${currentJobId} (right)`;
+    `${scene}: baseline job ${result.baseline_job_id} (left) vs current job ${result.job_id} (right), at the run's exposure ` +
+    `${formatValue(result.metrics?.exposure_ev)} EV. The run stored ΔE₀₀ p95 ${formatValue(stored.p95)} (noise level ${formatValue(stored.p95_noise)}), ` +
+    `ꟻLIP mean ${formatValue(flip.mean)} (noise level ${formatValue(flip.mean_noise)}).`;
   if (compareView) compareView.destroy();
   compareView = await mountCompare(document.getElementById("compare"), {
-    leftJobId: baselineJobId,
-    rightJobId: currentJobId,
+    leftJobId: result.baseline_job_id,
+    rightJobId: result.job_id,
     api,
     mode: "de2000",
+    ev: result.metrics?.exposure_ev ?? null,
+    names: [`baseline v${result.baseline_version}`, "current"],
   });
   section.scrollIntoView({ behavior: "smooth" });
 }
@@ -164,7 +162,8 @@ async function selectSchedule(scheduleId) {
   ]);
   document.getElementById("runs-section").hidden = false;
   document.getElementById("runs-heading").textContent = `Runs of ${schedule.name}`;
-  drawTrend(runs.series, schedule.suite.thresholds.max_delta_e00_p95);
+  trendState = { series: runs.series, thresholds: schedule.suite.thresholds };
+  drawTrend();
   const body = document.querySelector("#runs tbody");
   body.replaceChildren();
   for (const run of runs.items) {
@@ -181,7 +180,7 @@ async function selectSchedule(scheduleId) {
       if (canCompare) {
         item.title = "compare with the baseline";
         item.addEventListener("click", () =>
-          showCompare(result.scene, result.baseline_job_id, result.job_id).catch(showError),
+          showCompare(result.scene, result).catch(showError),
         );
       }
       scenes.append(item);
@@ -199,6 +198,7 @@ function init() {
     saveToken(tokenInput.value.trim());
     loadSchedules().then(() => showError(null), showError);
   });
+  document.getElementById("trend-metric").addEventListener("change", drawTrend);
   document.getElementById("schedule-form").addEventListener("submit", (event) => {
     createSchedule(event).then(() => showError(null), showError);
   });

@@ -22,6 +22,7 @@ from hgcore.store.base import ArtifactNotFoundError
 from schemas import EXAMPLES_DIR
 from service.api.deps import JobsDep, Reader, visible_job
 from service.api.routes.jobs import _ERRORS, JobId
+from service.image_metrics import map_statistics
 from service.jobs import JobConflictError
 from service.models import Problem
 from service.viewer_data import (
@@ -29,8 +30,10 @@ from service.viewer_data import (
     DecodedImage,
     DecodedImageCache,
     LayerInfo,
+    UploadedImages,
+    decode_uploaded_exr,
+    diagnostics_exr,
     difference_map,
-    difference_statistics,
     display_png,
     ellipse_grid,
     encode_array,
@@ -68,6 +71,18 @@ class LayerCatalogue(BaseModel):
     wavelengths_nm: list[float]
     layers: list[LayerView]
     partial: bool = Field(False, description="True while the job runs: merged from its finished chunks.")
+    uploaded: bool = Field(False, description="True for an EXR dropped into the viewer (POST /v1/images).")
+    exposure_ev: float = Field(
+        description="Automatic exposure (EV): maps the 99th percentile of luminance Y (from the bands) to "
+        "white; the viewer and compare view open at it, and regression runs use it for ΔE₀₀ and ꟻLIP."
+    )
+
+
+class UploadedImage(BaseModel):
+    id: str = Field(description="Use it in place of a job id with every viewer endpoint (`#/view/<id>`).")
+    width: int
+    height: int
+    wavelengths_nm: list[float]
 
 
 class PixelView(BaseModel):
@@ -110,13 +125,18 @@ class ExampleScene(BaseModel):
     title: str = Field(examples=["Cornell box"])
 
 
-def install(app: FastAPI, max_images: int = 8) -> None:
-    """Add the viewer routes and their decoded-image cache to ``app``."""
+def install(app: FastAPI, max_images: int = 8, max_uploads: int = 4) -> None:
+    """Add the viewer routes, their decoded-image cache and the in-memory uploaded images to ``app``."""
     app.state.viewer_images = DecodedImageCache(app.state.store, max_images)
+    app.state.viewer_uploads = UploadedImages(max_uploads)
     app.include_router(router)
 
 
 async def _image(request: Request, jobs: JobsDep, principal: Reader, job_id: str) -> DecodedImage:
+    uploads: UploadedImages = request.app.state.viewer_uploads
+    uploaded = uploads.get(job_id, principal.can_see)
+    if uploaded is not None:
+        return uploaded
     view = await run_in_threadpool(visible_job, jobs, principal, job_id)
     cache: DecodedImageCache = request.app.state.viewer_images
     if view.status == JobStatus.SUCCEEDED:
@@ -146,9 +166,12 @@ def _layer_view(info: LayerInfo) -> LayerView:
 async def list_layers(request: Request, job_id: JobId, jobs: JobsDep, principal: Reader) -> LayerCatalogue:
     image = await _image(request, jobs, principal, job_id)
     layers = await run_in_threadpool(image.layers)
+    uploads: UploadedImages = request.app.state.viewer_uploads
     return LayerCatalogue(
         job_id=job_id,
         partial=image.partial,
+        uploaded=uploads.get(job_id, principal.can_see) is not None,
+        exposure_ev=await run_in_threadpool(image.exposure_ev),
         width=image.width,
         height=image.height,
         wavelengths_nm=image.wavelengths_nm,
@@ -225,6 +248,21 @@ async def get_display_png(
 
 
 @router.get(
+    "/v1/jobs/{job_id}/diagnostics.exr",
+    summary="The coherence diagnostics as an OpenEXR file",
+    response_class=Response,
+    responses={**_IMAGE_ERRORS, 200: {"content": {"image/x-exr": {}}, "description": "float32 EXR."}},
+)
+async def get_diagnostics_exr(request: Request, job_id: JobId, jobs: JobsDep, principal: Reader) -> Response:
+    """Every `coherence.*` channel of the image (ℓ₁, ℓ₂ in µm at 550 nm, angle in rad, anisotropy, area
+    in µm², r in m, M in m⁻², weight), float32, the channel names of `image.exr`."""
+    image = await _image(request, jobs, principal, job_id)
+    body = await run_in_threadpool(diagnostics_exr, image)
+    disposition = f'attachment; filename="{job_id}_diagnostics.exr"'
+    return Response(body, media_type="image/x-exr", headers={"Content-Disposition": disposition})
+
+
+@router.get(
     "/v1/jobs/{job_id}/ellipses",
     response_model=EllipseGrid,
     summary="Coherence ellipses on a grid",
@@ -261,24 +299,67 @@ async def compare_jobs(
     principal: Reader,
     a: Annotated[str, Query(pattern=r"^[0-9a-f]{32}$", description="Reference job id.")],
     b: Annotated[str, Query(pattern=r"^[0-9a-f]{32}$", description="Compared job id.")],
-    mode: Annotated[str, Query(pattern=f"^({'|'.join(COMPARE_MODES)})$", description="abs, rel or de2000.")],
-    ev: ExposureEV = 0.0,
-    tonemap: ToneMap = "clamp",
+    mode: Annotated[
+        str, Query(pattern=f"^({'|'.join(COMPARE_MODES)})$", description="abs, rel, de2000 or flip.")
+    ],
+    ev: Annotated[
+        float | None,
+        Query(ge=-64, le=64, description="Exposure of de2000/flip (EV); default: a's automatic exposure."),
+    ] = None,
     format: Annotated[str, Query(pattern="^(f16|f32)$")] = "f32",
 ) -> Response:
     """Float (H, W) map, row-major from the top-left: `abs` = mean |b − a| over linear R, G, B; `rel` =
-    the same over max(|a|, 1 % of a's mean luminance); `de2000` = CIEDE2000 of both as displayed with `ev`
-    and `tonemap`. Headers `X-Width`, `X-Height` and `X-Stats` (JSON: mean, p95, max)."""
+    the same over max(|a|, 1 % of a's mean luminance); `de2000` = CIEDE2000 ΔE₀₀ and `flip` = ꟻLIP of the
+    two spectral images at exposure `ev` (`service.image_metrics`, the code regression runs use). Headers
+    `X-Width`, `X-Height`, `X-Stats` (JSON: mean, p95, max) and `X-Exposure-EV` (the EV used)."""
     image_a = await _image(request, jobs, principal, a)
     image_b = await _image(request, jobs, principal, b)
-    values = await run_in_threadpool(difference_map, image_a, image_b, mode, ev, tonemap)
+    exposure_ev = ev if ev is not None else await run_in_threadpool(image_a.exposure_ev)
+    values = await run_in_threadpool(difference_map, image_a, image_b, mode, exposure_ev)
     headers = {
         "X-Width": str(values.shape[1]),
         "X-Height": str(values.shape[0]),
-        "X-Stats": json.dumps(difference_statistics(values)),
-        "Access-Control-Expose-Headers": "X-Width, X-Height, X-Stats",
+        "X-Stats": json.dumps(map_statistics(values)),
+        "X-Exposure-EV": repr(exposure_ev),
+        "Access-Control-Expose-Headers": "X-Width, X-Height, X-Stats, X-Exposure-EV",
     }
     return Response(encode_array(values, format), media_type="application/octet-stream", headers=headers)
+
+
+@router.post(
+    "/v1/images",
+    response_model=UploadedImage,
+    status_code=201,
+    summary="View a spectral EXR from disk (drag and drop into the viewer)",
+    responses={
+        **_ERRORS,
+        413: {"model": Problem, "description": "Larger than HGRENDER_MAX_REQUEST_BYTES."},
+        422: {"model": Problem, "description": "Not an OpenEXR file, or fewer than 2 S0.<λ>nm channels."},
+    },
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "content": {
+                media_type: {"schema": {"type": "string", "format": "binary"}}
+                for media_type in ("application/octet-stream", "image/x-exr")
+            },
+        }
+    },
+)
+async def upload_image(request: Request, principal: Reader) -> UploadedImage:
+    """The body is the EXR file itself. It is decoded with OpenImageIO, checked to carry at least two
+    spectral `S0.<λ>nm` channels, and kept in the service's memory only (the last 4 uploads; nothing is
+    stored): the returned id works with every viewer endpoint for its uploader. Size bounded by the
+    request limit (413)."""
+    data = await request.body()
+    image = await run_in_threadpool(decode_uploaded_exr, data)
+    uploads: UploadedImages = request.app.state.viewer_uploads
+    return UploadedImage(
+        id=uploads.add(principal.owner, image),
+        width=image.width,
+        height=image.height,
+        wavelengths_nm=image.wavelengths_nm,
+    )
 
 
 @router.get("/v1/examples", response_model=list[ExampleScene], summary="Example scenes", responses=_ERRORS)
