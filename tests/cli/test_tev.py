@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.cli.conftest import Served
 from tests.cli.tev_listener import TevListener
 from tests.web.conftest import read_exr
 
@@ -101,3 +102,32 @@ def test_tev_address_is_validated(tmp_path: Path) -> None:
     result = run("render", str(small_scene(tmp_path)), "-o", str(tmp_path / "out"), "--tev", "host:99999")
     assert result.returncode == 2
     assert "argument --tev: must be HOST:PORT with a port in 1..65535, got 'host:99999'" in result.stderr
+
+
+@pytest.mark.slow
+def test_view_streams_a_running_job_then_its_final_image(
+    served: Served, tmp_path: Path, tev: TevListener
+) -> None:
+    from tests.service.conftest import tiny_scene
+
+    # A job ahead in the one worker's queue keeps ours queued while `view` starts following it; then its
+    # four chunks finish one by one.
+    served.client.submit(tiny_scene(size_px=32, spp=256), chunks=1, name="tev view blocker")
+    job = served.client.submit(tiny_scene(size_px=24, spp=256), chunks=4, name="tev view")
+    common = ["--url", served.base_url, "--token", served.token]
+    result = run("view", job["id"], "--tev", f"127.0.0.1:{tev.port}", *common)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.splitlines()[-1] == f"{job['id']}: sent to tev at 127.0.0.1:{tev.port}"
+    exr = read_exr(served.client.download(job["id"], "image.exr", tmp_path / "image.exr"))
+    name = f"hgrender {job['id']}"
+    image = tev.images[name]
+    assert image.channel_names[:3] == ["R", "G", "B"]
+    assert set(image.channel_names) == set(exr.channels)
+    for channel, values in exr.channels.items():
+        np.testing.assert_allclose(image.pixels[channel], values, rtol=1e-6, atol=0, err_msg=channel)
+    # Followed while running: partial images (chunks finished so far) came before the final one.
+    assert image.updates["R"] >= 2, result.stderr
+    assert not np.allclose(image.snapshots["R"][0], image.snapshots["R"][-1])
+    # Without --tev: the browser viewer's address for the job.
+    printed = run("view", job["id"], *common)
+    assert printed.stdout.strip() == f"{served.base_url}/#/view/{job['id']}"
