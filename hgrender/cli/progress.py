@@ -46,7 +46,9 @@ class ProgressDisplay:
                 total=100,
                 file=self.stream,
                 desc=label,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix} [{elapsed}<{remaining}]",
+                # `{unit}` carries the step text verbatim (`{postfix}` would prefix it with ", ").
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {unit} [{elapsed}<{remaining}]",
+                unit="",
             )
 
     def update(
@@ -63,7 +65,7 @@ class ProgressDisplay:
         step = describe_step(status, chunks_done, chunks_total, eta_s)
         if self._bar is not None:
             self._bar.n = 100 * fraction
-            self._bar.set_postfix_str(step, refresh=False)
+            self._bar.unit = step
             self._bar.refresh()
             return
         # One line per step: the ETA alone changing is not a step (it changes with every event).
