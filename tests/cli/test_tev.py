@@ -110,14 +110,26 @@ def test_view_streams_a_running_job_then_its_final_image(
 ) -> None:
     from tests.service.conftest import tiny_scene
 
-    # A job ahead in the one worker's queue keeps ours queued while `view` starts following it; then its
-    # four chunks finish one by one.
-    served.client.submit(tiny_scene(size_px=32, spp=256), chunks=1, name="tev view blocker")
+    # A long job ahead in the one worker's queue keeps ours queued until `view` follows it; canceling the
+    # blocker then lets our four chunks run one by one while `view` watches.
+    blocker = served.client.submit(tiny_scene(size_px=64, spp=65536), chunks=1, name="tev view blocker")
     job = served.client.submit(tiny_scene(size_px=24, spp=256), chunks=4, name="tev view")
     common = ["--url", served.base_url, "--token", served.token]
-    result = run("view", job["id"], "--tev", f"127.0.0.1:{tev.port}", *common)
-    assert result.returncode == 0, result.stderr
-    assert result.stderr.splitlines()[-1] == f"{job['id']}: sent to tev at 127.0.0.1:{tev.port}"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("HGRENDER_")}
+    command = [str(HGRENDER), "view", job["id"], "--tev", f"127.0.0.1:{tev.port}", *common]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        assert process.stderr is not None
+        first = process.stderr.readline()  # the first progress line: view follows the queued job
+        assert first == f"job {job['id']}:   0% (queued, 0/4 chunks)\n", first
+        served.client.cancel(blocker["id"])
+        rest = process.stderr.read()
+        assert process.wait(timeout=300) == 0, rest
+    finally:
+        if process.poll() is None:
+            process.kill()
+    lines = (first + rest).splitlines()
+    assert lines[-1] == f"{job['id']}: sent to tev at 127.0.0.1:{tev.port}"
     exr = read_exr(served.client.download(job["id"], "image.exr", tmp_path / "image.exr"))
     name = f"hgrender {job['id']}"
     image = tev.images[name]
@@ -126,7 +138,7 @@ def test_view_streams_a_running_job_then_its_final_image(
     for channel, values in exr.channels.items():
         np.testing.assert_allclose(image.pixels[channel], values, rtol=1e-6, atol=0, err_msg=channel)
     # Followed while running: partial images (chunks finished so far) came before the final one.
-    assert image.updates["R"] >= 2, result.stderr
+    assert image.updates["R"] >= 2, lines
     assert not np.allclose(image.snapshots["R"][0], image.snapshots["R"][-1])
     # Without --tev: the browser viewer's address for the job.
     printed = run("view", job["id"], *common)
