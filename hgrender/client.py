@@ -32,6 +32,10 @@ class ApiError(Exception):
         self.request = request  # "GET /v1/jobs/…", for messages about a wrong URL
 
     @property
+    def is_success(self) -> bool:
+        return 200 <= self.status_code < 300
+
+    @property
     def from_hgrender(self) -> bool:
         """Whether an hgrender API gave this answer: its errors are JSON ``{"detail": ...}`` naming a
         field, while an unknown path or another server gives HTML, or the framework's bare 404/405."""
@@ -100,7 +104,12 @@ class HgrenderClient:
             return self._check(self.http.request(method, path, **kwargs))
 
     def _json(self, method: str, path: str, **kwargs: Any) -> Any:
-        return self._request(method, path, **kwargs).json()
+        response = self._request(method, path, **kwargs)
+        try:
+            return response.json()
+        except ValueError:  # a 2xx that is not JSON: some other server answered
+            request = f"{response.request.method} {response.request.url.path}"
+            raise ApiError(response.status_code, "the answer is not JSON", None, request) from None
 
     # ---- jobs -----------------------------------------------------------------------------------------
 

@@ -112,8 +112,8 @@ class ServiceTarget:
         if not error.from_hgrender:
             return (
                 f"url: no hgrender API at {self.url} (URL from {self.url_source}): HTTP {error.status_code} "
-                f"for {error.request}; set the service's base URL, e.g. {DEFAULT_URL}, with --url or "
-                f"{URL_VARIABLE}"
+                f"{'with a non-JSON answer ' if error.is_success else ''}for {error.request}; set the "
+                f"service's base URL, e.g. {DEFAULT_URL}, with --url or {URL_VARIABLE}"
             )
         if error.status_code == 401:
             return (

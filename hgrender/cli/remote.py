@@ -223,24 +223,24 @@ def view_command(args: argparse.Namespace) -> int:
     if args.tev is None:
         print(f"{target.url}/#/view/{args.job_id}")
         return 0
-    with target.reporting(), target.client() as client:
+    # tev first: one that is not running is reported before anything is asked of the service.
+    with TevImage(args.tev, f"hgrender {args.job_id}") as tev, target.reporting(), target.client() as client:
         view = client.get(args.job_id)
-        with TevImage(args.tev, f"hgrender {args.job_id}") as tev:
-            shown_chunks = 0
+        shown_chunks = 0
 
-            def show_partial(state: dict[str, Any]) -> None:
-                nonlocal shown_chunks
-                done = int(state.get("chunks_done") or 0)
-                if state.get("status") == "running" and done > shown_chunks:
-                    tev.show(job_channels(client, args.job_id))
-                    shown_chunks = done
+        def show_partial(state: dict[str, Any]) -> None:
+            nonlocal shown_chunks
+            done = int(state.get("chunks_done") or 0)
+            if state.get("status") == "running" and done > shown_chunks:
+                tev.show(job_channels(client, args.job_id))
+                shown_chunks = done
 
-            if view["status"] not in ("succeeded", "failed", "canceled"):
-                view = follow_job(client, args.job_id, on_view=show_partial)
-            if view["status"] != "succeeded":
-                reason = view.get("error") or "it has no image"
-                raise CliError(f"job_id: job {args.job_id} {view['status']}: {reason}")
-            tev.show(job_channels(client, args.job_id))
+        if view["status"] not in ("succeeded", "failed", "canceled"):
+            view = follow_job(client, args.job_id, on_view=show_partial)
+        if view["status"] != "succeeded":
+            reason = view.get("error") or "it has no image"
+            raise CliError(f"job_id: job {args.job_id} {view['status']}: {reason}")
+        tev.show(job_channels(client, args.job_id))
     print(f"{args.job_id}: sent to tev at {args.tev[0]}:{args.tev[1]}", file=sys.stderr)
     return 0
 

@@ -4,11 +4,13 @@ the exact message below and exit 2, never a traceback; a good submission shows i
 
 from __future__ import annotations
 
+import http.server
 import json
 import os
 import socket
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import httpx
@@ -200,3 +202,33 @@ def test_submit_wait_with_film_overrides_writes_one_progress_line_per_step(
     assert any(
         line.startswith(job_id) and line.endswith("cli override") for line in listed.stdout.splitlines()
     )
+
+
+class _HtmlEverywhere(http.server.BaseHTTPRequestHandler):
+    """Some other web server: 200 and an HTML page for every path."""
+
+    def do_GET(self) -> None:
+        body = b"<html><body>not hgrender</body></html>"
+        self.send_response(200)
+        self.send_header("Content-Type", "text/html")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args: object) -> None:
+        pass
+
+
+def test_another_web_server_is_not_taken_for_the_api(tmp_path: Path) -> None:
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _HtmlEverywhere)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}"
+    try:
+        result = run("status", JOB_ID, "--url", url, "--data-dir", str(tmp_path))
+    finally:
+        server.shutdown()
+    assert error_lines(result) == [
+        f"hgrender status: error: url: no hgrender API at {url} (URL from --url): HTTP 200 with a non-JSON "
+        f"answer for GET /v1/jobs/{JOB_ID}; set the service's base URL, e.g. http://127.0.0.1:8000, with "
+        "--url or HGRENDER_URL"
+    ]

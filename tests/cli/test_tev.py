@@ -143,3 +143,13 @@ def test_view_streams_a_running_job_then_its_final_image(
     # Without --tev: the browser viewer's address for the job.
     printed = run("view", job["id"], *common)
     assert printed.stdout.strip() == f"{served.base_url}/#/view/{job['id']}"
+
+
+def test_view_with_no_tev_listening_is_one_line() -> None:
+    port = closed_port()
+    result = run("view", "0123456789abcdef0123456789abcdef", "--tev", f"127.0.0.1:{port}")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"hgrender view: error: tev: no tev listening at 127.0.0.1:{port} (connection refused); start tev "
+        "first (it listens on 127.0.0.1:14158 by default) or pass --tev HOST:PORT"
+    ]
