@@ -18,6 +18,7 @@ from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.connection import ServiceTarget, add_client_options
 from hgrender.cli.progress import ProgressDisplay
 from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TevImage, tev_address
+from hgrender.client import ApiError
 
 FILM_OVERRIDES: tuple[str, ...] = ("width", "height", "bands")
 SEED_MAX = 2**32 - 1
@@ -232,7 +233,13 @@ def view_command(args: argparse.Namespace) -> int:
             nonlocal shown_chunks
             done = int(state.get("chunks_done") or 0)
             if state.get("status") == "running" and done > shown_chunks:
-                tev.show(job_channels(client, args.job_id))
+                try:
+                    channels = job_channels(client, args.job_id)
+                except ApiError as error:
+                    if error.status_code != 409:
+                        raise
+                    return  # no merged chunk to show yet: a later event (or the final image) shows it
+                tev.show(channels)
                 shown_chunks = done
 
         if view["status"] not in ("succeeded", "failed", "canceled"):
