@@ -17,7 +17,7 @@ from typing import Any
 from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.connection import ServiceTarget, add_client_options
 from hgrender.cli.progress import ProgressDisplay
-from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TevImage, tev_address
+from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TEV_DEFAULT, TevImage, tev_address
 from hgrender.client import ApiError
 
 FILM_OVERRIDES: tuple[str, ...] = ("width", "height", "bands")
@@ -48,8 +48,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     submit.add_argument("--height", type=positive_int, default=None, help="film height, px (JSON scenes)")
     submit.add_argument("--bands", type=positive_int, default=None, help="spectral bands (JSON scenes)")
     submit.add_argument("--name", default=None, help="label shown in listings (default: the scene's)")
-    submit.add_argument("--priority", choices=("high", "normal", "low"), default="normal")
-    submit.add_argument("--idempotency-key", default=None)
+    submit.add_argument("--priority", choices=("high", "normal", "low"), default="normal", help="queue")
+    submit.add_argument(
+        "--idempotency-key", default=None, help="repeating a submission with this key returns the first job"
+    )
     submit.set_defaults(handler=submit_command)
 
     status = subparsers.add_parser("status", parents=[client_options], help="show a job")
@@ -83,7 +85,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         type=tev_address,
         metavar="HOST:PORT",
-        help=f"stream into a running tev (default address {DEFAULT_TEV_ADDRESS}), updated as chunks finish",
+        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated as chunks finish",
     )
     view.set_defaults(handler=view_command)
 

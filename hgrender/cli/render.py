@@ -9,7 +9,7 @@ from typing import Any
 
 from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.progress import ProgressDisplay
-from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TevImage, tev_address
+from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TEV_DEFAULT, TevImage, tev_address
 
 # With --tev and no --chunks, the render is split into this many chunks (at most spp) so that tev shows
 # the image refine as each chunk is added.
@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         type=tev_address,
         metavar="HOST:PORT",
-        help="stream into a running tev (default address 127.0.0.1:14158), updated after every chunk",
+        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated after every chunk",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=run)

@@ -21,6 +21,7 @@ import numpy as np
 from hgrender.cli import CliError
 
 DEFAULT_TEV_ADDRESS: tuple[str, int] = ("127.0.0.1", 14158)  # tev's default listen address
+TEV_DEFAULT = f"{DEFAULT_TEV_ADDRESS[0]}:{DEFAULT_TEV_ADDRESS[1]}"
 
 
 def tev_address(text: str) -> tuple[str, int]:
@@ -71,8 +72,7 @@ class TevImage:
             reason = error.strerror or str(error) or type(error).__name__
             raise CliError(
                 f"tev: no tev listening at {host}:{port} ({reason.lower()}); start tev first "
-                f"(it listens on {DEFAULT_TEV_ADDRESS[0]}:{DEFAULT_TEV_ADDRESS[1]} by default) or pass "
-                f"--tev HOST:PORT"
+                f"(it listens on {TEV_DEFAULT} by default) or pass --tev HOST:PORT"
             ) from None
         self._ipc = ipc
         return self
