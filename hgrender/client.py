@@ -8,7 +8,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import re
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -22,19 +24,60 @@ FINAL_STATUSES = frozenset({"succeeded", "failed", "canceled"})
 class ApiError(Exception):
     """A non-2xx answer; ``status_code`` and the server's ``detail``."""
 
-    def __init__(self, status_code: int, detail: str, body: Any = None) -> None:
+    def __init__(self, status_code: int, detail: str, body: Any = None, request: str = "") -> None:
         super().__init__(f"HTTP {status_code}: {detail}")
         self.status_code = status_code
         self.detail = detail
         self.body = body
+        self.request = request  # "GET /v1/jobs/…", for messages about a wrong URL
+
+    @property
+    def is_success(self) -> bool:
+        return 200 <= self.status_code < 300
+
+    @property
+    def from_hgrender(self) -> bool:
+        """Whether an hgrender API gave this answer: its errors are JSON ``{"detail": ...}`` naming a
+        field, while an unknown path or another server gives HTML, or the framework's bare 404/405."""
+        return (
+            isinstance(self.body, dict)
+            and isinstance(self.body.get("detail"), str)
+            and self.detail not in ("Not Found", "Method Not Allowed")
+        )
+
+
+class ServiceUnreachableError(Exception):
+    """No HTTP answer from ``url``: nothing listens there, the host is unknown, or it timed out."""
+
+    def __init__(self, url: str, reason: str) -> None:
+        super().__init__(f"cannot reach {url} ({reason})")
+        self.url = url
+        self.reason = reason
+
+
+def _transport_reason(error: httpx.TransportError) -> str:
+    """A short lower-case reason: "connection refused", "name or service not known", "timed out"."""
+    if isinstance(error, httpx.TimeoutException):
+        return "timed out"
+    text = str(error) or type(error).__name__
+    return re.sub(r"^\[Errno -?\d+\] ", "", text).rstrip(".").lower()
 
 
 class HgrenderClient:
-    """Thin wrapper of the ``/v1`` endpoints; every method returns the decoded JSON."""
+    """Thin wrapper of the ``/v1`` endpoints; every method returns the decoded JSON. Transport failures
+    raise ``ServiceUnreachableError``, non-2xx answers ``ApiError``."""
 
     def __init__(self, base_url: str, token: str | None = None, timeout_s: float = 60.0) -> None:
         headers = {"Authorization": f"Bearer {token}"} if token else {}
-        self.http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers, timeout=timeout_s)
+        self.base_url = base_url.rstrip("/")
+        self.http = httpx.Client(base_url=self.base_url, headers=headers, timeout=timeout_s)
+
+    @contextlib.contextmanager
+    def _reaching(self) -> Iterator[None]:
+        try:
+            yield
+        except httpx.TransportError as error:
+            raise ServiceUnreachableError(self.base_url, _transport_reason(error)) from error
 
     def close(self) -> None:
         self.http.close()
@@ -53,10 +96,20 @@ class HgrenderClient:
             detail = body.get("detail", response.text) if isinstance(body, dict) else response.text
         except ValueError:
             body, detail = None, response.text
-        raise ApiError(response.status_code, str(detail), body)
+        request = f"{response.request.method} {response.request.url.path}"
+        raise ApiError(response.status_code, str(detail), body, request)
+
+    def _request(self, method: str, path: str, **kwargs: Any) -> httpx.Response:
+        with self._reaching():
+            return self._check(self.http.request(method, path, **kwargs))
 
     def _json(self, method: str, path: str, **kwargs: Any) -> Any:
-        return self._check(self.http.request(method, path, **kwargs)).json()
+        response = self._request(method, path, **kwargs)
+        try:
+            return response.json()
+        except ValueError:  # a 2xx that is not JSON: some other server answered
+            request = f"{response.request.method} {response.request.url.path}"
+            raise ApiError(response.status_code, "the answer is not JSON", None, request) from None
 
     # ---- jobs -----------------------------------------------------------------------------------------
 
@@ -87,7 +140,7 @@ class HgrenderClient:
         return self._json("POST", f"/v1/jobs/{job_id}/cancel")
 
     def delete(self, job_id: str) -> None:
-        self._check(self.http.delete(f"/v1/jobs/{job_id}"))
+        self._request("DELETE", f"/v1/jobs/{job_id}")
 
     def artifacts(self, job_id: str) -> list[dict[str, Any]]:
         return self._json("GET", f"/v1/jobs/{job_id}/artifacts")["items"]
@@ -97,7 +150,7 @@ class HgrenderClient:
         destination = Path(destination)
         destination.parent.mkdir(parents=True, exist_ok=True)
         tmp_path = destination.with_name(f".{destination.name}.part")
-        with self.http.stream("GET", f"/v1/jobs/{job_id}/artifacts/{name}") as response:
+        with self._reaching(), self.http.stream("GET", f"/v1/jobs/{job_id}/artifacts/{name}") as response:
             if not response.is_success:
                 response.read()
                 self._check(response)
@@ -119,7 +172,10 @@ class HgrenderClient:
         """(event, data) pairs of the job's SSE stream until it ends; TimeoutError once ``deadline``
         (``time.monotonic()``) has passed (checked at every line, the server pings every few seconds)."""
         timeout = httpx.Timeout(self.http.timeout.connect, read=60.0)
-        with self.http.stream("GET", f"/v1/jobs/{job_id}/events", timeout=timeout) as response:
+        with (
+            self._reaching(),
+            self.http.stream("GET", f"/v1/jobs/{job_id}/events", timeout=timeout) as response,
+        ):
             if not response.is_success:
                 response.read()
                 self._check(response)
@@ -151,8 +207,8 @@ class HgrenderClient:
                     on_event(event, data)
                 if event == "status" and data.get("status") in FINAL_STATUSES:
                     return data
-        except httpx.HTTPError:
-            pass  # fall back to polling below
+        except ServiceUnreachableError:
+            pass  # a broken stream: fall back to polling below (which reports a service that is down)
         while True:
             view = self.get(job_id)
             if on_event is not None:
@@ -162,6 +218,14 @@ class HgrenderClient:
             if deadline is not None and time.monotonic() > deadline:
                 raise TimeoutError(f"job_id: {job_id} not finished after {timeout_s} s")
             time.sleep(poll_interval_s)
+
+    def layers(self, job_id: str) -> dict[str, Any]:
+        """The viewer's catalogue of the job's image: ``width``, ``height``, ``partial``, ``layers``."""
+        return self._json("GET", f"/v1/jobs/{job_id}/layers")
+
+    def layer(self, job_id: str, name: str) -> bytes:
+        """One layer as little-endian float32, row-major, channels interleaved (``rgb``: 3)."""
+        return self._request("GET", f"/v1/jobs/{job_id}/layers/{name}", params={"format": "f32"}).content
 
     # ---- other resources ------------------------------------------------------------------------------
 

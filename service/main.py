@@ -11,6 +11,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from fastapi_offline import FastAPIOffline
 
 from hgcore import __version__
 from hgcore.redis_clients import async_redis_client, redis_client
@@ -19,6 +20,7 @@ from hgcore.store import store_from_settings
 from schemas import SceneLimits
 from service.api.errors import install_exception_handlers
 from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware
+from service.api.openapi import install_openapi
 from service.api.routes import coherence, health, jobs, schemas, tokens, viewer, web
 from service.api.routes import schedules as regression_routes
 from service.auth import RequestAuthenticator, TokenRegistry
@@ -30,6 +32,8 @@ DESCRIPTION = """Render partially-coherent light in Hermite-Gauss space (Steinbe
 Submit a scene (`POST /v1/jobs`), follow it (`GET /v1/jobs/{id}` or the SSE stream `/events`), and
 download its spectral EXR, coherence diagnostics, preview and summary (`/artifacts`). Authenticate with
 `Authorization: Bearer <token>`; `hgrender serve` writes a first admin token to `<data dir>/admin.token`.
+Errors are `{"detail": "<field>: <what is wrong>"}`, plus `errors` listing every problem of a rejected
+request. Interactive pages: `/docs` (Swagger UI) and `/redoc`, served from this server (no CDN).
 """
 
 
@@ -45,7 +49,8 @@ def create_app(settings: Settings) -> FastAPI:
         await app.state.aredis.aclose()
         app.state.redis.close()
 
-    app = FastAPI(
+    # FastAPIOffline: a plain FastAPI whose /docs and /redoc load Swagger UI and ReDoc from this server.
+    app = FastAPIOffline(
         title="hgrender",
         version=__version__,
         description=DESCRIPTION,
@@ -58,7 +63,9 @@ def create_app(settings: Settings) -> FastAPI:
             {"name": "health", "description": "Liveness, readiness, metrics."},
             {"name": "regression", "description": "Regression schedules, runs and baselines."},
         ],
+        swagger_ui_parameters={"validatorUrl": None},  # no badge fetched from validator.swagger.io
     )
+    install_openapi(app)
     client = redis_client(settings.redis_url, health_check_interval=30)
     store = store_from_settings(settings)
     app.state.settings = settings

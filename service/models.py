@@ -117,7 +117,10 @@ class ArtifactList(BaseModel):
 
 
 class TokenCreate(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"owner": "alice", "scopes": ["submit", "read"], "name": "laptop"}]},
+    )
 
     owner: str = Field(min_length=1, max_length=128, pattern=r"^[A-Za-z0-9._@-]+$", examples=["alice"])
     scopes: list[Literal["submit", "read", "admin"]] = Field(min_length=1, examples=[["submit", "read"]])

@@ -32,7 +32,7 @@ from typing import Any, Literal
 import numpy as np
 
 from hgcore.artifacts.exr import ArtifactFormatError, read_exr, write_exr
-from hgcore.artifacts.images import image_channels, images_from_sums
+from hgcore.artifacts.images import channels_from_sums
 from hgcore.artifacts.keys import artifact_key, chunks_prefix
 from hgcore.artifacts.layout import (
     CHUNK_PARTIAL_SUFFIX,
@@ -269,11 +269,8 @@ def merge_partials(paths: list[Path], film: dict[str, Any]) -> DecodedImage:
     if total is None:
         raise ArtifactNotFoundError("chunks")
     bands = BandLayout(film["wavelength_min_nm"], film["wavelength_max_nm"], film["bands"])
-    images = images_from_sums(total, bands)
-    channels = {
-        name: np.ascontiguousarray(values, dtype=np.float32) for name, values in image_channels(images, bands)
-    }
-    height, width = images["depth"].shape
+    channels = channels_from_sums(total, bands)
+    height, width = channels[COHERENCE_WEIGHT].shape
     return _decoded(width, height, channels, partial=True)
 
 

@@ -104,6 +104,15 @@ def image_channels(images: dict[str, np.ndarray], bands: BandLayout) -> list[tup
     return channels
 
 
+def channels_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray]:
+    """``image.exr``'s channels (name → float32 (H, W) array) for sums, without writing a file: a running
+    job's preview (the viewer, tev)."""
+    images = images_from_sums(sums, bands)
+    return {
+        name: np.ascontiguousarray(values, dtype=np.float32) for name, values in image_channels(images, bands)
+    }
+
+
 def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path) -> list[str]:
     """image.exr, variance.exr and preview.png into ``out_dir``; returns the file names."""
     write_exr(out_dir / IMAGE_EXR, image_channels(images, bands), SPECTRAL_ATTRIBUTES)

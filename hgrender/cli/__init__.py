@@ -9,20 +9,48 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import sys
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 # Sub-command modules, in help order. A module missing here is simply not offered.
 COMMAND_MODULES: tuple[str, ...] = (
     "hgrender.cli.render",
     "hgrender.cli.coherence",
     "hgrender.cli.service",
+    "hgrender.cli.remote",
     "hgrender.cli.regress",
 )
 
 
 class CliError(Exception):
     """An error to report to the user as one line on stderr with exit code 2."""
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer ≥ 1 (argparse names the option in its error)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return value
+
+
+def read_json_file(path: Path, field: str) -> Any:
+    """The parsed JSON file; a ``CliError`` naming ``field``, the file and, for a syntax error, its
+    line and column (``scene: bad.json:3:14: not valid JSON: Expecting ',' delimiter``)."""
+    if not path.is_file():
+        raise CliError(f"{field}: no such file {str(path)!r}")
+    try:
+        return json.loads(path.read_bytes())
+    except json.JSONDecodeError as error:
+        raise CliError(f"{field}: {path}:{error.lineno}:{error.colno}: not valid JSON: {error.msg}") from None
+    except UnicodeDecodeError as error:
+        raise CliError(f"{field}: {path}: not UTF-8 text (byte {error.start})") from None
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -31,7 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from hgcore.artifacts.layout import IMAGE_EXR
-from hgrender.cli import CliError
+from hgrender.cli import CliError, read_json_file
+from hgrender.cli.connection import ServiceTarget, add_client_options
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -46,11 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     regress.add_argument("--junit", type=Path, default=None, help="write a JUnit XML report here")
     regress.add_argument("--seed", type=int, default=None, help="base seed (default: random)")
     regress.add_argument("--work-dir", type=Path, default=None, help="keep the renders here")
-    regress.add_argument("--url", default=None, help="run on this service instead of locally")
-    regress.add_argument("--token", default=os.environ.get("HGRENDER_TOKEN"), help="API token (with --url)")
-    regress.add_argument(
-        "--data-dir", type=Path, default=Path("./data"), help="where to find admin.token when no --token"
-    )
+    add_client_options(regress, url_default_help="run on the service at this URL instead of locally")
     regress.add_argument("--timeout-s", type=float, default=3600.0, help="longest wait for a service run")
     regress.set_defaults(handler=regress_command)
 
@@ -67,19 +64,23 @@ def load_suite(path: Path) -> Any:
 
     if not path.is_file():
         raise CliError(f"suite: {path} is not a file")
-    text = path.read_text()
     if path.suffix.lower() in (".yaml", ".yml"):
         import yaml
 
-        data = yaml.safe_load(text)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as error:
+            raise CliError(f"suite: {path}: not valid YAML: {error}".replace("\n", " ")) from None
     else:
-        data = json.loads(text)
+        data = read_json_file(path, "suite")
     try:
         return Suite.model_validate(data)
     except ValidationError as error:
-        first = error.errors()[0]
-        location = ".".join(str(part) for part in first["loc"]) or "suite"
-        raise CliError(f"suite: {location}: {first['msg']}") from None
+        problems = [
+            f"suite: {'.'.join(str(part) for part in item['loc']) or '/'}: {item['msg']}"
+            for item in error.errors()
+        ]
+        raise CliError("\n".join(problems)) from None
 
 
 def _copy_outputs(source: Path, destination: Path) -> None:
@@ -171,18 +172,17 @@ def run_on_service(
     args: argparse.Namespace, suite: Any, poll_interval_s: float = 1.0
 ) -> list[dict[str, Any]]:
     """``POST /v1/runs``, wait until the run ends, optionally promote it; one result dict per scene."""
-    from hgrender.cli.service import _call, _client
-
-    with _client(args) as client:
-        run = _call(client._json, "POST", "/v1/runs", json={"suite": suite.model_dump(mode="json")})
+    target = ServiceTarget.from_args(args)
+    with target.reporting(), target.client() as client:
+        run = client._json("POST", "/v1/runs", json={"suite": suite.model_dump(mode="json")})
         deadline = time.monotonic() + args.timeout_s
         while run["status"] == "running":
             if time.monotonic() > deadline:
                 raise CliError(f"timeout_s: run {run['id']} still running after {args.timeout_s} s")
             time.sleep(poll_interval_s)
-            run = _call(client._json, "GET", f"/v1/runs/{run['id']}")
+            run = client._json("GET", f"/v1/runs/{run['id']}")
         if args.update_baseline:
-            _call(client._json, "POST", "/v1/baselines", json={"run_id": run["id"]})
+            client._json("POST", "/v1/baselines", json={"run_id": run["id"]})
     print(f"run {run['id']}: {run['status']}", file=sys.stderr)
     return [
         {"scene": r["scene"], "verdict": r["verdict"], "reasons": r["reasons"], "metrics": r["metrics"]}

@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
+from typing import Any
 
-from hgrender.cli import CliError
+from hgrender.cli import CliError, positive_int, read_json_file
+from hgrender.cli.progress import ProgressDisplay
+from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TEV_DEFAULT, TevImage, tev_address
+
+# With --tev and no --chunks, the render is split into this many chunks (at most spp) so that tev shows
+# the image refine as each chunk is added.
+TEV_DEFAULT_CHUNKS = 8
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,11 +25,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--spp", type=int, help="samples per pixel (overrides the scene's film.spp)")
     parser.add_argument("--seed", type=int, help="random seed (overrides film.seed)")
     parser.add_argument("--modes", type=int, help="HG transverse modes 1..16 (overrides film.modes)")
-    parser.add_argument("--chunks", type=int, default=1, help="render in K chunks and merge (default 1)")
+    parser.add_argument(
+        "--chunks",
+        type=positive_int,
+        default=None,
+        help=f"render in K chunks and merge (default 1; with --tev {TEV_DEFAULT_CHUNKS})",
+    )
     parser.add_argument(
         "--variant",
         choices=("auto", "llvm_ad_spectral", "cuda_ad_spectral"),
         help="Mitsuba variant (default: HGRENDER_VARIANT or auto)",
+    )
+    parser.add_argument(
+        "--tev",
+        nargs="?",
+        const=DEFAULT_TEV_ADDRESS,
+        default=None,
+        type=tev_address,
+        metavar="HOST:PORT",
+        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated after every chunk",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=run)
@@ -35,10 +55,7 @@ def load_scene_file(path: Path) -> tuple[dict, Path | None]:
         raise CliError(f"scene: no such file {str(path)!r}")
     suffix = path.suffix.lower()
     if suffix == ".json":
-        try:
-            return json.loads(path.read_text()), path.parent
-        except json.JSONDecodeError as error:
-            raise CliError(f"scene: {path} is not valid JSON: {error}") from None
+        return read_json_file(path, "scene"), path.parent
     if suffix in (".usda", ".usdc", ".usdz", ".usd", ".zip"):
         from schemas.usd_import import import_usd_isolated
 
@@ -48,38 +65,31 @@ def load_scene_file(path: Path) -> tuple[dict, Path | None]:
 
 
 def run(args: argparse.Namespace) -> int:
+    import contextlib
     import os
 
     if args.variant:
         os.environ["HGRENDER_VARIANT"] = args.variant
     scene, bundle_dir = load_scene_file(args.scene)
-    from tqdm import tqdm
-
     from schemas.validation import validate_scene
     from worker.render.api import render_scene
 
     parsed = validate_scene(scene)
-    with tqdm(
-        total=100,
-        unit="%",
-        disable=args.quiet,
-        file=sys.stderr,
-        desc="render",
-        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f}% [{elapsed}<{remaining}]",
-    ) as bar:
-
-        def progress(fraction: float) -> None:
-            bar.update(100 * fraction - bar.n)
-
+    chunks = args.chunks if args.chunks is not None else (TEV_DEFAULT_CHUNKS if args.tev else 1)
+    with contextlib.ExitStack() as stack:
+        # tev first: a tev that is not running is reported before any rendering starts.
+        tev = stack.enter_context(TevImage(args.tev, f"hgrender {args.scene.stem}")) if args.tev else None
+        display = stack.enter_context(ProgressDisplay("render", enabled=not args.quiet))
         summary = render_scene(
             parsed,
             args.output,
             spp=args.spp,
             seed=args.seed,
             modes=args.modes,
-            chunks=args.chunks,
-            progress=progress,
+            chunks=chunks,
+            progress=display.update,
             bundle_dir=bundle_dir,
+            on_chunk=None if tev is None else lambda sums: tev.show(channels_of_sums(sums, parsed.film)),
         )
     print(
         json.dumps(
@@ -92,3 +102,11 @@ def run(args: argparse.Namespace) -> int:
         )
     )
     return 0
+
+
+def channels_of_sums(sums: Any, film: Any) -> dict[str, Any]:
+    """``image.exr``'s channels (name → (H, W) array) of the chunks' running sum, without writing it."""
+    from hgcore.artifacts.images import channels_from_sums
+    from hgcore.artifacts.layout import BandLayout
+
+    return channels_from_sums(sums, BandLayout(film.wavelength_min_nm, film.wavelength_max_nm, film.bands))

@@ -1,17 +1,14 @@
-"""``hgrender serve | worker | submit | status | list | cancel | download | token``: run the service and
-talk to it.
+"""``hgrender serve | worker``: run the service (the commands that talk to it are in ``remote.py``).
 
 ``serve`` runs the API (uvicorn) plus ``--workers`` queue workers as child processes (restarted if they
 die) and, when ``REDIS_URL`` is unset, a private ``redis-server`` with its data under ``<data dir>/redis``;
-it writes a first admin token to ``<data dir>/admin.token``. The client commands find the server in
-``--url`` / ``HGRENDER_URL`` and the token in ``--token`` / ``HGRENDER_TOKEN`` / ``<data dir>/admin.token``.
+it writes a first admin token to ``<data dir>/admin.token``.
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
-import json
 import os
 import signal
 import subprocess
@@ -21,9 +18,6 @@ from pathlib import Path
 from typing import Any
 
 from hgcore.redis_clients import redis_client
-from hgrender.cli import CliError
-
-DEFAULT_URL = "http://127.0.0.1:8000"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -38,51 +32,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     worker.add_argument("--burst", action="store_true", help="exit when the queues are empty")
     worker.add_argument("--name", default=None, help="worker name (default: host name + random suffix)")
     worker.set_defaults(handler=worker_command)
-
-    client_options = argparse.ArgumentParser(add_help=False)
-    client_options.add_argument("--url", default=os.environ.get("HGRENDER_URL", DEFAULT_URL))
-    client_options.add_argument("--token", default=os.environ.get("HGRENDER_TOKEN"))
-    client_options.add_argument(
-        "--data-dir", type=Path, default=Path("./data"), help="where to find admin.token when no --token"
-    )
-
-    submit = subparsers.add_parser("submit", parents=[client_options], help="submit a scene file")
-    submit.add_argument("scene", type=Path, help=".json scene, .usda/.usdc/.usdz or a .zip bundle")
-    submit.add_argument("--wait", action="store_true", help="follow progress until the job finishes")
-    submit.add_argument("--spp", type=int, default=None)
-    submit.add_argument("--chunks", type=int, default=None)
-    submit.add_argument("--seed", type=int, default=None)
-    submit.add_argument("--priority", choices=("high", "normal", "low"), default="normal")
-    submit.add_argument("--idempotency-key", default=None)
-    submit.set_defaults(handler=submit_command)
-
-    status = subparsers.add_parser("status", parents=[client_options], help="show a job")
-    status.add_argument("job_id")
-    status.set_defaults(handler=status_command)
-
-    listing = subparsers.add_parser("list", parents=[client_options], help="list jobs")
-    listing.add_argument(
-        "--status", default=None, choices=("queued", "running", "succeeded", "failed", "canceled")
-    )
-    listing.add_argument("--limit", type=int, default=50)
-    listing.set_defaults(handler=list_command)
-
-    cancel = subparsers.add_parser("cancel", parents=[client_options], help="cancel a job")
-    cancel.add_argument("job_id")
-    cancel.set_defaults(handler=cancel_command)
-
-    download = subparsers.add_parser("download", parents=[client_options], help="download a job's artifacts")
-    download.add_argument("job_id")
-    download.add_argument("-o", "--output", type=Path, default=None, help="directory (default: ./<job id>)")
-    download.set_defaults(handler=download_command)
-
-    token = subparsers.add_parser("token", help="manage API tokens")
-    token_commands = token.add_subparsers(dest="token_command", required=True)
-    create = token_commands.add_parser("create", parents=[client_options], help="create a token (admin)")
-    create.add_argument("--scopes", default="submit,read", help="comma-separated: submit, read, admin")
-    create.add_argument("--owner", required=True)
-    create.add_argument("--name", default="")
-    create.set_defaults(handler=token_create_command)
 
 
 # ---- server side ---------------------------------------------------------------------------------------
@@ -202,100 +151,3 @@ def worker_command(args: argparse.Namespace) -> int:
     settings = Settings()
     preload_renderer()  # forked work horses inherit the imported renderer
     return run_worker(settings, burst=args.burst, name=args.name)
-
-
-# ---- client side ---------------------------------------------------------------------------------------
-
-
-def _client(args: argparse.Namespace) -> Any:
-    from hgrender.client import HgrenderClient
-
-    token = args.token
-    token_file = args.data_dir / "admin.token"
-    if not token and token_file.exists():
-        token = token_file.read_text().strip()
-    return HgrenderClient(args.url, token=token)
-
-
-def _call(function: Any, *call_args: Any, **kwargs: Any) -> Any:
-    from hgrender.client import ApiError
-
-    try:
-        return function(*call_args, **kwargs)
-    except ApiError as error:
-        raise CliError(str(error)) from None
-
-
-def submit_command(args: argparse.Namespace) -> int:
-    if not args.scene.is_file():
-        raise CliError(f"scene: {args.scene} is not a file")
-    with _client(args) as client:
-        created = _call(
-            client.submit,
-            args.scene,
-            priority=args.priority,
-            spp=args.spp,
-            chunks=args.chunks,
-            seed=args.seed,
-            idempotency_key=args.idempotency_key,
-        )
-        print(created["id"])
-        if not args.wait:
-            return 0
-        final = _follow(client, created["id"])
-    print(json.dumps({k: final.get(k) for k in ("id", "status", "error")}))
-    return 0 if final["status"] == "succeeded" else 1
-
-
-def _follow(client: Any, job_id: str) -> dict[str, Any]:
-    """Wait for the job with a live tqdm bar fed by its SSE progress (polling if SSE is unavailable)."""
-    from tqdm import tqdm
-
-    with tqdm(total=1.0, unit="job", bar_format="{l_bar}{bar}| {n:.0%} [{elapsed}<{remaining}]") as bar:
-
-        def on_event(event: str, data: dict[str, Any]) -> None:
-            bar.n = float(data.get("progress", bar.n))
-            bar.set_postfix_str(
-                f"{data.get('status', 'running')} {data.get('chunks_done', '')}", refresh=False
-            )
-            bar.refresh()
-
-        return _call(client.wait, job_id, on_event=on_event)
-
-
-def status_command(args: argparse.Namespace) -> int:
-    with _client(args) as client:
-        print(json.dumps(_call(client.get, args.job_id), indent=2))
-    return 0
-
-
-def list_command(args: argparse.Namespace) -> int:
-    with _client(args) as client:
-        page = _call(client.list, status=args.status, limit=args.limit)
-    for job in page["items"]:
-        label = job.get("name") or ""
-        print(f"{job['id']}  {job['status']:<9}  {job['progress']:6.1%}  {job['owner']:<12} {label}")
-    print(f"{len(page['items'])} of {page['total']} jobs", file=sys.stderr)
-    return 0
-
-
-def cancel_command(args: argparse.Namespace) -> int:
-    with _client(args) as client:
-        print(_call(client.cancel, args.job_id)["status"])
-    return 0
-
-
-def download_command(args: argparse.Namespace) -> int:
-    out_dir = args.output if args.output is not None else Path(args.job_id)
-    with _client(args) as client:
-        for path in _call(client.download_all, args.job_id, out_dir):
-            print(path)
-    return 0
-
-
-def token_create_command(args: argparse.Namespace) -> int:
-    scopes = [s.strip() for s in args.scopes.split(",") if s.strip()]
-    with _client(args) as client:
-        created = _call(client.create_token, args.owner, scopes, args.name)
-    print(created["token"])
-    return 0

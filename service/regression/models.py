@@ -205,7 +205,17 @@ class RunView(BaseModel):
 class RunCreate(BaseModel):
     """``POST /v1/runs``: run a suite once, outside any schedule (``hgrender regress --url``)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "suite": {"scenes": [{"example": "cornell_box", "spp": 16, "width": 32, "height": 32}]},
+                    "webhook_url": "https://ci.example.com/hooks/hgrender",
+                }
+            ]
+        },
+    )
 
     suite: Suite
     webhook_url: HttpUrl | None = Field(None, description="POSTed a JSON report when the run fails.")
@@ -237,7 +247,15 @@ class BaselineList(BaseModel):
 class PromoteRequest(BaseModel):
     """``POST /v1/baselines``: a job (with ``scene``) or a whole run becomes the baseline."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"run_id": "9c1d2e3f4a5b6c7d8e9f0a1b2c3d4e5f"},
+                {"job_id": "3f2a9c0d4b1e4f6a8d7c6b5a4e3d2c1b", "scene": "cornell_box"},
+            ]
+        },
+    )
 
     job_id: str | None = Field(None, pattern=r"^[0-9a-f]{32}$")
     scene: str | None = Field(None, pattern=SCENE_NAME_PATTERN, description="Scene key, with `job_id`.")

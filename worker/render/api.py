@@ -207,8 +207,10 @@ def render_scene(
     chunks: int = 1,
     progress: ProgressCallback | None = None,
     bundle_dir: Path | None = None,
+    on_chunk: Callable[[PixelSums], None] | None = None,
 ) -> dict[str, Any]:
-    """Render locally (chunks run one after another) and write the final artifacts to ``out_dir``."""
+    """Render locally (chunks run one after another) and write the final artifacts to ``out_dir``.
+    ``on_chunk(sums)`` gets the running sum of the chunks finished so far after each one (previews)."""
     parsed = as_scene(scene)
     overrides = {
         key: value for key, value in (("spp", spp), ("seed", seed), ("modes", modes)) if value is not None
@@ -220,6 +222,7 @@ def render_scene(
     partial_dir = out_dir / ".chunks"
     paths = []
     done_spp = 0
+    running: PixelSums | None = None
     for chunk in plan:
 
         def chunk_progress(fraction: float, chunk: ChunkSpec = chunk, done: int = done_spp) -> None:
@@ -227,9 +230,13 @@ def render_scene(
                 progress((done + fraction * chunk.spp) / parsed.film.spp)
 
         path = partial_dir / f"{chunk.index:04d}.npz"
-        render_chunk(parsed, chunk, path, progress=chunk_progress, bundle_dir=bundle_dir)
+        rendered = render_chunk_sums(parsed, chunk, progress=chunk_progress, bundle_dir=bundle_dir)
+        save_chunk(rendered, path)
         paths.append(path)
         done_spp += chunk.spp
+        if on_chunk is not None:
+            running = rendered.sums if running is None else running.add(rendered.sums)
+            on_chunk(running)
     summary = merge_chunks(parsed, paths, out_dir)
     for path in paths:
         path.unlink(missing_ok=True)

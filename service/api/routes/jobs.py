@@ -52,6 +52,7 @@ _MULTIPART_SCHEMA = {
         "name": {"type": "string"},
     },
 }
+_MULTIPART_EXAMPLE = {"scene": "scene.usda", "priority": "normal", "spp": 64, "chunks": 4, "name": "usd box"}
 
 
 async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str, bytes], JobOptions]:
@@ -96,7 +97,7 @@ async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str,
                 # Inlined: the route reads the body itself (JSON or multipart), so FastAPI registers no
                 # component for JobCreate. Its schema has no nested definitions to resolve.
                 "application/json": {"schema": JobCreate.model_json_schema()},
-                "multipart/form-data": {"schema": _MULTIPART_SCHEMA},
+                "multipart/form-data": {"schema": _MULTIPART_SCHEMA, "example": _MULTIPART_EXAMPLE},
             },
         }
     },
@@ -167,12 +168,38 @@ def delete_job(job_id: JobId, jobs: JobsDep, principal: Submitter) -> Response:
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
+# One Server-Sent Event (the form schemathesis and OpenAPI 3.2's `itemSchema` describe events in).
+_SSE_EVENT_SCHEMA = {
+    "type": "object",
+    "required": ["event", "data"],
+    "properties": {
+        "event": {"type": "string", "enum": ["status", "progress"]},
+        "data": {
+            "type": "string",
+            "contentMediaType": "application/json",
+            "description": "`status`: the job view (as `GET /v1/jobs/{id}`); `progress`: `progress`, "
+            "`chunks_done`, `chunks_total`, `eta_s`.",
+        },
+        "id": {"type": "string"},
+        "retry": {"type": "integer"},
+    },
+}
+_SSE_EXAMPLE = (
+    'event: status\ndata: {"id": "3f2a...", "status": "running", "progress": 0.25, ...}\n\n'
+    'event: progress\ndata: {"progress": 0.5, "chunks_done": 2, "chunks_total": 4, "eta_s": 3.1}\n\n'
+)
+
+
 @router.get(
     "/{job_id}/events",
     summary="Follow a job (Server-Sent Events)",
+    response_class=EventSourceResponse,
     responses={
         **_ERRORS,
-        200: {"content": {"text/event-stream": {}}, "description": "status/progress events"},
+        200: {
+            "content": {"text/event-stream": {"schema": _SSE_EVENT_SCHEMA, "example": _SSE_EXAMPLE}},
+            "description": "`status` and `progress` events (`data:` is JSON) until a final status.",
+        },
     },
 )
 async def job_event_stream(
@@ -202,12 +229,25 @@ def list_artifacts(job_id: JobId, jobs: JobsDep, store: StoreDep, principal: Rea
 
 
 _MEDIA_TYPES = {".exr": "image/x-exr", ".png": "image/png", ".json": "application/json", ".log": "text/plain"}
+_BINARY = {"schema": {"type": "string", "format": "binary"}}
 
 
 @router.get(
     "/{job_id}/artifacts/{name:path}",
     summary="Download an artifact",
-    responses={**_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "The file."}},
+    response_class=StreamingResponse,
+    responses={
+        **_ERRORS,
+        200: {
+            # Every type an artifact is sent as (by its suffix): image.exr/variance.exr are spectral
+            # OpenEXR (`image/x-exr`), preview.png PNG, summary/manifest JSON, worker.log text, chunk
+            # partials (.npz) and uploaded bundle files octet streams.
+            "content": {
+                media_type: _BINARY for media_type in (*_MEDIA_TYPES.values(), "application/octet-stream")
+            },
+            "description": "The file, as an attachment; its media type follows its suffix.",
+        },
+    },
 )
 def download_artifact(
     job_id: JobId, name: str, jobs: JobsDep, store: StoreDep, principal: Reader

@@ -340,8 +340,13 @@ async def compare_jobs(
         "requestBody": {
             "required": True,
             "content": {
-                media_type: {"schema": {"type": "string", "format": "binary"}}
-                for media_type in ("application/octet-stream", "image/x-exr")
+                # The body is read as raw bytes whatever its type (image/x-exr too); one type is listed
+                # because the example must be serialisable. A real body is a file's bytes (e.g. a job's
+                # image.exr); this placeholder gets a 422.
+                "application/octet-stream": {
+                    "schema": {"type": "string", "format": "binary"},
+                    "example": "<the bytes of a spectral OpenEXR file such as a job's image.exr>",
+                }
             },
         }
     },
