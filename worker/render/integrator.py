@@ -16,13 +16,18 @@ leaves a *pending* record, resolved at the next non-specular vertex or emitter h
 * ``film_separation``: for a thin-film vertex, the separation τ·n̂ (m) between the film's two interfaces,
   also carried through the chain, and its partially-coherent reflectance terms (linear in the visibilities).
 
-At resolution the source is the emitter (whole emitter, BRIEF) or the next vertex's scattering region
-(Theorem 5.1(ii): the scattered shape depends only on the ensemble-averaged reflectivity over that region;
-a uniform disk of radius ``scattering_region_radius_m``, see docs/physics.md).
+At resolution the source is the emitter (whole emitter, BRIEF) or a non-specular surface: a *secondary*
+incoherent source whose extent is the part of that surface that is lit and seen from the receiver (van
+Cittert–Zernike, docs/physics.md §7). Its points are mutually incoherent, so each path, which reaches one
+point of it, carries a point source (Σ⊥ = 0, phase along the sampled direction); averaging the paths
+gives the partially coherent response of the whole lit patch. A material's explicit
+``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane.
 
 Diagnostics (BRIEF): M = (k/r)²Σ⊥ at λ = 550 nm of the light incident at the first non-specular vertex,
-luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, all later
-contributions the resolved Σ⊥ of the first vertex's indirect light.
+luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, light
+from emitters hit by BSDF sampling the emitter's Σ⊥, light from secondary sources the VCZ estimate of
+``output.secondary_source_m``: the luminance-weighted covariance of the directions the pixel's paths
+receive it from (per-sample sums ``vcz_*``).
 """
 
 from __future__ import annotations
@@ -81,6 +86,11 @@ class PathResult:
     diag_r: Any
     diag_cos2: Any
     diag_sin2: Any
+    # Light from secondary sources (non-specular surfaces without a region override): its luminance, that
+    # times r, and the direction (camera coordinates: right, up, forward) it arrives from at the first vertex.
+    vcz_weight: Any
+    vcz_r: Any
+    vcz_direction: Any
     depth_m: Any
     normal: Any
     albedo: Any
@@ -147,14 +157,30 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         return mi.Vector3f(*x_axis), mi.Vector3f(*y_axis)
 
     def _scattering_region(self, material: Any, normal: Any, frame_x: Any, frame_y: Any):
-        """Σ⊥ of a non-specular vertex's scattering region (uniform disk in the tangent plane), in the
-        frame ⟂ to the direction it is seen along (the projection depends on that frame only)."""
+        """(Σ⊥, overridden) of the secondary source a path reaches at a non-specular vertex, in the frame ⟂
+        to the direction it is seen along.
+
+        Without an override the path carries one point of the lit patch (Σ⊥ = 0; the patch's extent comes
+        from averaging paths, module docstring); with ``scattering_region_radius_m`` a uniform disk of that
+        radius in the tangent plane (the projection depends on the frame only).
+        """
         radius = self.kernels.param(material, mat.SCATTERING_REGION_RADIUS_M)
-        return sources.disk_covariance_components(
+        sigma = sources.disk_covariance_components(
             radius,
             (normal.x, normal.y, normal.z),
             (frame_x.x, frame_x.y, frame_x.z),
             (frame_y.x, frame_y.y, frame_y.z),
+        )
+        return sigma, radius > 0.0
+
+    def _camera_coordinates(self, direction: Any) -> Any:
+        """``direction`` in the camera's (right, up, forward) basis (orthonormal: covariances are kept)."""
+        context = self.context
+        forward = dr.cross(context.camera_right, context.camera_up)
+        return mi.Vector3f(
+            dr.dot(direction, context.camera_right),
+            dr.dot(direction, context.camera_up),
+            dr.dot(direction, forward),
         )
 
     def _emitter_lookup(self, emitter_ptr: Any) -> Any:
@@ -262,6 +288,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         d_r = mi.Float(0.0)
         d_c2 = mi.Float(0.0)
         d_s2 = mi.Float(0.0)
+        # light from secondary sources (VCZ estimate from the spread of its arrival directions)
+        ind_vcz = mi.Bool(False)
+        first_direction = mi.Vector3f(0.0, 0.0, 1.0)
+        v_w = mi.Float(0.0)
+        v_r = mi.Float(0.0)
         aov_depth = mi.Float(0.0)
         aov_normal = mi.Vector3f(0.0)
         aov_material = mi.UInt32(self.context.black_material)
@@ -301,7 +332,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                     frame_x,
                     frame_y,
                 )
-                sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, frame_x, frame_y)
+                (sr_xx, sr_xy, sr_yy), overridden = self._scattering_region(material, si.n, frame_x, frame_y)
                 src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
                 src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
                 src_yy = dr.select(hit_emitter, em_syy, sr_yy)
@@ -347,6 +378,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 ind_r = dr.select(record_indirect, chain_distance, ind_r)
                 ind_c2 = dr.select(record_indirect, c2, ind_c2)
                 ind_s2 = dr.select(record_indirect, s2, ind_s2)
+                ind_vcz = dr.select(record_indirect, ~hit_emitter & ~overridden, ind_vcz)
                 indirect_ready |= record_indirect
             pending &= ~resolve
             film_pending &= ~resolve
@@ -360,6 +392,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             L += emitted
             weight_em = _luminance(y_weights, emitted)
             add_indirect = indirect_ready & seen_nonspecular
+            v_w += dr.select(add_indirect & ind_vcz, weight_em, 0.0)
+            v_r += dr.select(add_indirect & ind_vcz, weight_em * ind_r, 0.0)
+            add_indirect &= ~ind_vcz
             d_w += dr.select(add_indirect, weight_em, 0.0)
             d_mxx += dr.select(add_indirect, weight_em * ind_mxx, 0.0)
             d_mxy += dr.select(add_indirect, weight_em * ind_mxy, 0.0)
@@ -438,6 +473,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             nee_scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(nee_r, 1e-9))
             direct_m = (nee_scale2 * nee_sxx, nee_scale2 * nee_sxy, nee_scale2 * nee_syy)
             use_ind = do_nee & seen_nonspecular & indirect_ready
+            v_w += dr.select(use_ind & ind_vcz, weight_direct, 0.0)
+            v_r += dr.select(use_ind & ind_vcz, weight_direct * ind_r, 0.0)
+            use_ind &= ~ind_vcz
             w_first = dr.select(at_first, weight_direct, 0.0)
             w_later = dr.select(use_ind, weight_direct, 0.0)
             d_w += w_first + w_later
@@ -471,6 +509,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             frame_y = dr.select(new_record, incoming_fy, frame_y)
             first_frame_x = dr.select(new_record & ~seen_nonspecular, incoming_fx, first_frame_x)
             first_frame_y = dr.select(new_record & ~seen_nonspecular, incoming_fy, first_frame_y)
+            first_direction = dr.select(new_record & ~seen_nonspecular, wo_world, first_direction)
             pending_first = dr.select(new_record, ~seen_nonspecular, pending_first)
             pending |= new_record
             chain_distance = dr.select(new_record, 0.0, chain_distance)
@@ -511,7 +550,22 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             depth += 1
 
         aov_albedo = self.kernels.albedo(aov_material, wavelengths)
-        return PathResult(L, d_w, d_mxx, d_mxy, d_myy, d_r, d_c2, d_s2, aov_depth, aov_normal, aov_albedo)
+        return PathResult(
+            L,
+            d_w,
+            d_mxx,
+            d_mxy,
+            d_myy,
+            d_r,
+            d_c2,
+            d_s2,
+            v_w,
+            v_r,
+            self._camera_coordinates(first_direction),
+            aov_depth,
+            aov_normal,
+            aov_albedo,
+        )
 
 
 def register() -> None:

@@ -51,7 +51,8 @@ MAX_ORDER = 20
 DISPERSIVE = 21  # 1 when the dielectric index varies with wavelength
 STRIDE = 22
 
-DEFAULT_SCATTERING_REGION_RADIUS_M = 1e-3
+# 0: no override; a non-specular vertex is a secondary source sized by the lit patch (docs/physics.md §7).
+DEFAULT_SCATTERING_REGION_RADIUS_M = 0.0
 
 # Materials whose response is a Dirac delta (coherence kept, r accumulated: paper §5, "Perfectly specular").
 SPECULAR_KINDS = frozenset({MaterialKind.MIRROR, MaterialKind.DIELECTRIC})
