@@ -252,6 +252,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
         eta_scale = mi.Float(1.0)
+        collapsed = mi.Bool(False)  # only the hero wavelength is left (dispersive refraction)
         depth = mi.UInt32(0)
         prev_si = dr.zeros(mi.SurfaceInteraction3f)
         prev_pdf = mi.Float(1.0)
@@ -266,6 +267,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         first_frame_x = mi.Vector3f(0.0)
         first_frame_y = mi.Vector3f(0.0)
         film_pending = mi.Bool(False)
+        film_transmitted = mi.Bool(False)
         film_separation = mi.Vector3f(0.0)
         film_material = mi.UInt32(0)
         film_position = mi.Point3f(0.0)
@@ -319,8 +321,41 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             aov_normal = dr.select(first, si.sh_frame.n, aov_normal)
             aov_material = dr.select(first, material, aov_material)
 
+            # --- shading frame (two-sided except for interfaces that transmit)
+            frame = mi.Frame3f(si.sh_frame)
+            wi_world = -ray.d
+            flip = (dr.dot(wi_world, frame.n) < 0) & self.kernels.two_sided(material)
+            frame.n = dr.select(flip, -frame.n, frame.n)
+            frame.t = dr.select(flip, -frame.t, frame.t)
+            wi = frame.to_local(wi_world)
+            continue_path = nonspecular | specular
+            continue_path &= depth + 1 < self.max_depth
+
+            # --- sample the next direction (random numbers drawn in the order: NEE, then material)
+            nee_sample = sampler.next_2d(continue_path & nonspecular)
+            wo, weight, pdf, delta, sampled_film_terms, sampled_film_transmitted = self.kernels.sample(
+                material,
+                wi,
+                wavelengths,
+                sampler.next_1d(continue_path),
+                sampler.next_2d(continue_path),
+                continue_path,
+                collapsed,
+            )
+            wo_world = frame.to_world(wo)
+            # A Dirac refraction through a dispersive medium leaves the hero wavelength only (bsdfs).
+            refracted = continue_path & delta & (wi.z * wo.z < 0)
+            collapsed |= refracted & (self.kernels.param(material, mat.DISPERSIVE) > 0.5)
+            # A film on glass reflecting or refracting specularly keeps a pending record's coherence, like
+            # smooth glass (the coated ball's far side passes on the light it transmits); its own
+            # interference then uses the incoherent sum it was sampled with.
+            film_passthrough = mi.Bool(False)
+            if has_film:
+                film_passthrough = nonspecular & pending & delta
+                film_passthrough &= self.kernels.param(material, mat.FILM_TRANSMITS) > 0.5
+
             # --- resolve the pending vertex's incident coherence: the source is what we just reached
-            resolve = pending & (hit_emitter | nonspecular)
+            resolve = pending & (hit_emitter | (nonspecular & ~film_passthrough))
             em_record = self._emitter_lookup(emitter_ptr)
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
@@ -354,7 +389,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 if has_film:
                     # An emitter reached straight from the film: its interference phase is taken towards the
                     # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
-                    centre_phase = hit_emitter & ~chain_specular
+                    centre_phase = hit_emitter & ~chain_specular & ~film_transmitted
                     _, emitter_to_film = emitter_direction(
                         mi, self.context.emitter_flat, em_record, film_position
                     )
@@ -367,7 +402,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                         phase_terms,
                         lambda d, c=resolved, v=film_separation: self.visibility(c, v * d, wavelengths),
                     )
-                    film_factor = film_factor / dr.maximum(film_terms[0], 1e-12)
+                    # The path was sampled with the incoherent part at its own direction: apply the relative
+                    # interference modulation R(V)/R_incoherent of the phase direction.
+                    film_factor = film_factor / dr.maximum(phase_terms[0], 1e-12)
                     beta = dr.select(resolve & film_pending, beta * film_factor, beta)
                 record_indirect = resolve & pending_first
                 scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(chain_distance, 1e-9))
@@ -403,22 +440,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             d_c2 += dr.select(add_indirect, weight_em * ind_c2, 0.0)
             d_s2 += dr.select(add_indirect, weight_em * ind_s2, 0.0)
 
-            # --- shading frame (two-sided except for dielectrics)
-            frame = mi.Frame3f(si.sh_frame)
-            wi_world = -ray.d
-            two_sided = (kind != int(mat.MaterialKind.DIELECTRIC)) & (
-                kind != int(mat.MaterialKind.ROUGH_DIELECTRIC)
-            )
-            flip = (dr.dot(wi_world, frame.n) < 0) & two_sided
-            frame.n = dr.select(flip, -frame.n, frame.n)
-            frame.t = dr.select(flip, -frame.t, frame.t)
-            wi = frame.to_local(wi_world)
-            continue_path = nonspecular | specular
-            continue_path &= depth + 1 < self.max_depth
-
             # --- next-event estimation at non-specular vertices
             do_nee = continue_path & nonspecular
-            ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(do_nee), True, do_nee)
+            ds_em, em_weight = scene.sample_emitter_direction(si, nee_sample, True, do_nee)
             do_nee &= ds_em.pdf != 0.0
             em_record_nee = self._emitter_lookup(ds_em.emitter)
             nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
@@ -486,21 +510,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             d_c2 += w_first * nee_c2 + w_later * ind_c2
             d_s2 += w_first * nee_s2 + w_later * ind_s2
 
-            # --- sample the next direction
-            wo, weight, pdf, delta, sampled_film_terms = self.kernels.sample(
-                material,
-                wi,
-                wavelengths,
-                sampler.next_1d(continue_path),
-                sampler.next_2d(continue_path),
-                continue_path,
-            )
-            wo_world = frame.to_world(wo)
             beta = dr.select(continue_path, beta * weight, 0.0)
 
             # Start a new pending record at a non-specular vertex; carry it through specular ones.
             # Without thin films only the first non-specular vertex needs its incident coherence.
-            new_record = continue_path & nonspecular & (~seen_nonspecular | has_film)
+            new_record = continue_path & nonspecular & ~film_passthrough & (~seen_nonspecular | has_film)
             incoming_fx = mi.Vector3f(frame_x)
             incoming_fy = mi.Vector3f(frame_y)
             if new_record:
@@ -522,10 +536,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 film_material = dr.select(is_film, material, film_material)
                 film_position = dr.select(is_film, si.p, film_position)
                 film_normal = dr.select(is_film, frame.n, film_normal)
+                film_transmitted = dr.select(is_film, sampled_film_transmitted, film_transmitted)
                 for index in range(film_beams):
                     film_terms[index] = dr.select(is_film, sampled_film_terms[index], film_terms[index])
             # Through a perfect mirror / refraction the carried vectors follow the beam.
-            through_specular = continue_path & specular & pending
+            through_specular = continue_path & (specular | film_passthrough) & pending
             chain_specular = dr.select(new_record, False, chain_specular | through_specular)
             frame_x = dr.select(through_specular, _reflect_vector(frame_x, frame.n), frame_x)
             frame_y = dr.select(through_specular, _reflect_vector(frame_y, frame.n), frame_y)
