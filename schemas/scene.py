@@ -496,9 +496,11 @@ Shape = Annotated[
 
 
 class _ScatteringMaterial(StrictModel):
-    """Non-specular materials: radius of the coherent scattering region of a path vertex (docs/physics.md)."""
+    """Non-specular materials. Light they scatter is a secondary source sized by the lit, seen part of the
+    surface (van Cittert–Zernike, docs/physics.md §7); ``scattering_region_radius_m`` overrides that with a
+    uniform disk of this radius in the tangent plane (an explicit modelling choice)."""
 
-    scattering_region_radius_m: PositiveFloat = 1e-3
+    scattering_region_radius_m: PositiveFloat | None = None
 
 
 class DiffuseMaterial(_ScatteringMaterial):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +39,75 @@ from hgcore.artifacts.pixel_sums import PixelSums
 from hgcore.colour import band_edges_xyz_weights, xyz_to_linear_srgb, y_bar_integral_nm
 from hgcore.files import atomic_write_bytes
 from hgcore.imaging import auto_exposure_ev, display_rgb8
-from hgcore.optics.coherence import diagnostics_components
+from hgcore.optics.coherence import diagnostics_components, principal_axes_components
+from hgcore.optics.frames import transverse_frame_components
+
+
+@dataclass
+class SecondarySource:
+    """The VCZ estimate of the light a pixel receives from secondary sources (per-pixel arrays)."""
+
+    weight: np.ndarray  # luminance-weighted sample weight that enters the pixel's diagnostics
+    weighted_r: np.ndarray  # that weight times the distance to the source (m)
+    m_per_m2: tuple[np.ndarray, np.ndarray, np.ndarray]  # M = k²·Cov(ω⊥) at 550 nm (xx, xy, yy)
+    cos_2psi: np.ndarray  # doubled screen angle of the ℓ₁ axis
+    sin_2psi: np.ndarray
+
+
+def secondary_source_m(values: dict[str, np.ndarray]) -> SecondarySource:
+    """M of the light from non-specular surfaces by van Cittert–Zernike (docs/physics.md §7).
+
+    An incoherent source of radiance L(ω) seen from the receiver has μ(ξ) = ∫L e^{ik ω⊥·ξ}dω / ∫L dω
+    (far field), whose curvature at ξ = 0 gives M = k²·Cov(ω⊥): the covariance of the arrival directions
+    weighted by the light they bring. The pixel's paths sample those directions with exactly that weight
+    (their luminance contribution), so the weighted sample covariance of their unit arrival directions d,
+    with the effective-sample-count correction W²/(W² − Σw²) (unbiased for weighted samples), projected on
+    the plane ⟂ the mean direction estimates it. Pixels with fewer than two effective samples have no
+    estimate and leave this part out. Directions are in camera coordinates (right, up, forward), so the
+    transverse x axis is the camera's right vector projected, as for the other paths (``frames``).
+    """
+    weight = values["vcz_w"]
+    weight_sq = values["vcz_w2"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        effective = np.where(weight_sq > 0, weight * weight / weight_sq, 0.0)
+    usable = effective >= 2.0
+    safe = np.where(usable, weight, 1.0)
+    mean = np.stack([values[f"vcz_d{axis}"] / safe for axis in "xyz"], axis=-1)
+    second = np.empty((*weight.shape, 3, 3))
+    for i, a in enumerate("xyz"):
+        for j, b in enumerate("xyz"):
+            key = f"vcz_d{a}{b}" if i <= j else f"vcz_d{b}{a}"
+            second[..., i, j] = values[key] / safe
+    bessel = np.where(usable, effective / np.maximum(effective - 1.0, 1.0), 0.0)
+    covariance = (second - mean[..., :, None] * mean[..., None, :]) * bessel[..., None, None]
+    norm = np.linalg.norm(mean, axis=-1, keepdims=True)
+    propagation = -mean / np.where(norm > 0, norm, 1.0)  # light travels from the source to the receiver
+    right = np.broadcast_to(np.array([1.0, 0.0, 0.0]), propagation.shape)
+    x_axis, y_axis = transverse_frame_components(
+        tuple(propagation[..., i] for i in range(3)), tuple(right[..., i] for i in range(3))
+    )
+    x_axis, y_axis = np.stack(x_axis, axis=-1), np.stack(y_axis, axis=-1)
+
+    def project(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.einsum("...i,...ij,...j->...", u, covariance, v)
+
+    k2 = K_REFERENCE_PER_M**2
+    m = (k2 * project(x_axis, x_axis), k2 * project(x_axis, y_axis), k2 * project(y_axis, y_axis))
+    m = tuple(np.where(usable, component, 0.0) for component in m)
+    # ℓ₁ runs along the eigenvector of M's smaller eigenvalue: e₂ = (−sin φ, cos φ) of principal_axes.
+    with np.errstate(divide="ignore", invalid="ignore"):  # M = 0 where there is no estimate
+        _, _, cos_phi, sin_phi = principal_axes_components(*m)
+    axis = -sin_phi[..., None] * x_axis + cos_phi[..., None] * y_axis
+    screen_x, screen_y = axis[..., 0], axis[..., 1]
+    norm2 = np.maximum(screen_x**2 + screen_y**2, 1e-20)
+    isotropic = np.abs(m[0] - m[2]) + 2 * np.abs(m[1]) <= 1e-6 * (m[0] + m[2])
+    return SecondarySource(
+        weight=np.where(usable, weight, 0.0),
+        weighted_r=np.where(usable, values["vcz_r"], 0.0),
+        m_per_m2=m,
+        cos_2psi=np.where(usable & ~isotropic, (screen_x**2 - screen_y**2) / norm2, 0.0),
+        sin_2psi=np.where(usable & ~isotropic, 2 * screen_x * screen_y / norm2, 0.0),
+    )
 
 
 def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray]:
@@ -50,17 +119,22 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
     xyz = band_mean @ band_edges_xyz_weights(bands.edges_nm) / y_bar_integral_nm()
     rgb = xyz_to_linear_srgb(xyz)
     values = sums.values
-    weight = values["diag_w"]
+    secondary = secondary_source_m(values)
+    weight = values["diag_w"] + secondary.weight
     covered = weight > 0
     safe = np.where(covered, weight, 1.0)
     m_xx, m_xy, m_yy = (
-        np.where(covered, values[key] / safe, 0.0) for key in ("diag_mxx", "diag_mxy", "diag_myy")
+        np.where(covered, (values[key] + secondary.weight * m) / safe, 0.0)
+        for key, m in zip(("diag_mxx", "diag_mxy", "diag_myy"), secondary.m_per_m2, strict=True)
     )
-    r_mean = np.where(covered, values["diag_r"] / safe, 0.0)
+    r_mean = np.where(covered, (values["diag_r"] + secondary.weighted_r) / safe, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         # (k/r)² Σ with r = k gives M itself: the diagnostics are computed from M directly.
         diag = diagnostics_components(m_xx, m_xy, m_yy, K_REFERENCE_PER_M, LAMBDA_REFERENCE_NM * 1e-9)
-    angle = 0.5 * np.arctan2(values["diag_s2"], values["diag_c2"])
+    angle = 0.5 * np.arctan2(
+        values["diag_s2"] + secondary.weight * secondary.sin_2psi,
+        values["diag_c2"] + secondary.weight * secondary.cos_2psi,
+    )
     coherence = {
         "l1_um": diag.l1_um,
         "l2_um": diag.l2_um,

@@ -112,6 +112,21 @@ def reflectance_terms(amplitudes: tuple[list[ComplexPair], list[ComplexPair]]) -
     return terms
 
 
+def transmission_terms(terms: Sequence[Any]) -> list[Any]:
+    """[T_incoherent, −X_1, …, −X_{P−1}]: the transmittance T(V) = 1 − R(V) of a lossless film on a
+    dielectric in the same linear-in-V form as :func:`reflectance_terms` (combine with
+    :func:`combine_reflectance_terms`).
+
+    Energy conservation fixes T: for real indices nothing is absorbed, so for every state of coherence the
+    reflected and transmitted powers add to the incident one. R(V) is linear in the V_d, hence so is T.
+    Checks (tests/optics/test_thin_film.py): under full coherence and P → ∞ it is the Airy transmittance
+    (q_s/q_0)|t_01 t_12 e^{iδ/2}/(1 + r_01 r_12 e^{iδ})|², incoherently the sum Σ_p (q_s/q_0)|t_p|² of the
+    transmitted beams, both computed from the transmitted amplitudes directly. With P beams the neglected
+    ones (≤ the truncation bound of the module docstring) go to T instead of being lost.
+    """
+    return [1.0 - terms[0], *(-term for term in terms[1:])]
+
+
 def combine_reflectance_terms(terms: Sequence[Any], visibilities: Sequence[Any]) -> Any:
     """R = R_incoherent + 2 Σ_d V_d X_d with V_d = ``visibilities[d−1]`` (as many as there are X_d)."""
     if len(visibilities) != len(terms) - 1:

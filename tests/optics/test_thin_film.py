@@ -18,8 +18,11 @@ from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.sources import cylinder_covariance_components
 from hgcore.optics.thin_film import (
     combine_reflectance_terms,
+    film_amplitudes,
     gaussian_visibilities,
+    reflectance_terms,
     thin_film_reflectance,
+    transmission_terms,
     validate_thin_film,
 )
 
@@ -144,6 +147,58 @@ def test_incoherent_limit_is_intensity_sum(n0: float, nf: float, eta_s: complex)
         geometric = (1.0 - ratio ** (beams - 1)) / (1.0 - ratio)
         expected = expected + 0.5 * (np.abs(r01) ** 2 + np.abs(t_product * r12) ** 2 * geometric)
     np.testing.assert_allclose(result, expected, atol=ROUND_OFF)
+
+
+def _transmitted_beams(cos_i, wavelength_m, thickness_m, n0, nf, n_s, polarisation, beams):
+    """(power factor, transmitted amplitudes b_p = t01 t12 e^{iδ/2} (r10 r12 e^{iδ})^p) from the textbook
+    interface formulas (E-field amplitudes: T = (n_s cos θ_s)/(n_0 cos θ_0)|t|² = (q_s/q_0)|t|² for s and
+    p alike with Hecht's t_p)."""
+    sin_sq = (n0**2) * (1.0 - cos_i**2)
+    q0 = n0 * cos_i + 0j
+    q1 = np.sqrt(nf**2 - sin_sq + 0j)
+    q2 = np.sqrt(n_s**2 - sin_sq + 0j)
+    if polarisation == "s":
+        t01, t12 = 2 * q0 / (q0 + q1), 2 * q1 / (q1 + q2)
+        r10, r12 = (q1 - q0) / (q0 + q1), (q1 - q2) / (q1 + q2)
+        power = (q2 / q0).real
+    else:
+        t01 = 2 * n0 * nf * q0 / (nf**2 * q0 + n0**2 * q1)
+        t12 = 2 * nf * n_s * q1 / (n_s**2 * q1 + nf**2 * q2)
+        r10 = (n0**2 * q1 - nf**2 * q0) / (nf**2 * q0 + n0**2 * q1)
+        r12 = (n_s**2 * q1 - nf**2 * q2) / (n_s**2 * q1 + nf**2 * q2)
+        power = (q2 / q0).real
+    phase = np.exp(1j * (2 * np.pi / wavelength_m) * q1 * thickness_m)
+    first = t01 * t12 * phase
+    bounce = r10 * r12 * phase**2
+    return power, [first * bounce**p for p in range(beams)]
+
+
+@pytest.mark.parametrize("theta_deg", [0.0, 35.0, 70.0])
+@pytest.mark.parametrize(("nf", "n_s"), [(1.38, 1.52), (2.1, 1.5), (1.45, 1.9)])
+def test_transmission_is_the_transmitted_beam_sum_and_conserves_energy(
+    theta_deg: float, nf: float, n_s: float
+) -> None:
+    """T(V) = 1 − R(V) (``transmission_terms``) equals the transmitted beams' own sums: the Airy
+    transmittance under full coherence and Σ_p |b_p|² incoherently (P = 60: the truncated tail is below
+    |r10 r12|^{120} ≈ 1e-40 here), at several angles and thicknesses; R + T = 1 for every V."""
+    cos_i = np.full(5, math.cos(math.radians(theta_deg)))
+    thickness_m = np.array([80e-9, 233e-9, 420e-9, 615e-9, 1230e-9])
+    wavelength_m, beams = 550e-9, 60
+    substrate = ComplexPair(np.full(5, n_s), np.zeros(5))
+    amplitudes = film_amplitudes(cos_i, wavelength_m, thickness_m, nf, substrate, 1.0, beams, NUMPY)
+    t_terms = transmission_terms(reflectance_terms(amplitudes))
+    coherent = incoherent = 0.0
+    for polarisation in ("s", "p"):
+        power, transmitted = _transmitted_beams(
+            cos_i, wavelength_m, thickness_m, 1.0, nf, n_s, polarisation, beams
+        )
+        coherent = coherent + 0.5 * power * np.abs(sum(transmitted)) ** 2
+        incoherent = incoherent + 0.5 * power * sum(np.abs(b) ** 2 for b in transmitted)
+    np.testing.assert_allclose(combine_reflectance_terms(t_terms, [1.0] * (beams - 1)), coherent, atol=1e-9)
+    np.testing.assert_allclose(combine_reflectance_terms(t_terms, [0.0] * (beams - 1)), incoherent, atol=1e-9)
+    partial = gaussian_visibilities(np.full(5, 0.7), beams - 1, NUMPY)
+    r_partial = combine_reflectance_terms(reflectance_terms(amplitudes), partial)
+    np.testing.assert_allclose(r_partial + combine_reflectance_terms(t_terms, partial), 1.0, atol=1e-12)
 
 
 def test_two_beam_is_eq18() -> None:

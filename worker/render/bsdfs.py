@@ -28,7 +28,12 @@ from hgcore.optics import grating as grating_model
 from hgcore.optics import rough_surface
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_dielectric, fresnel_reflectance
-from hgcore.optics.thin_film import combine_reflectance_terms, film_amplitudes, reflectance_terms
+from hgcore.optics.thin_film import (
+    combine_reflectance_terms,
+    film_amplitudes,
+    reflectance_terms,
+    transmission_terms,
+)
 from worker.render import materials as mat
 from worker.render.drjit_ops import drjit_ops
 from worker.render.spectral import lookup
@@ -82,6 +87,18 @@ class MaterialKernels:
 
     def kind(self, material: Any) -> Any:
         return self.mi.UInt32(self.param(material, mat.KIND))
+
+    def two_sided(self, material: Any) -> Any:
+        """Whether the shading frame is flipped towards the incident side: not for interfaces that
+        transmit (dielectrics, rough dielectrics, films on a dielectric), whose sides differ."""
+        kind = self.kind(material)
+        transmits = (kind == int(mat.MaterialKind.DIELECTRIC)) | (
+            kind == int(mat.MaterialKind.ROUGH_DIELECTRIC)
+        )
+        if mat.MaterialKind.THIN_FILM in self.kinds:
+            film = kind == int(mat.MaterialKind.THIN_FILM)
+            transmits |= film & (self.param(material, mat.FILM_TRANSMITS) > 0.5)
+        return ~transmits
 
     def is_specular(self, material: Any) -> Any:
         kind = self.kind(material)
@@ -166,12 +183,24 @@ class MaterialKernels:
         return value, pdf
 
     # ---------------------------------------------------------------- sampling
-    def sample(self, material: Any, wi: Any, wavelengths: Any, sample1: Any, sample2: Any, active: Any):
-        """(wo, weight = f·cos/pdf per wavelength, pdf, delta, film_terms) for the next path segment.
+    def sample(
+        self,
+        material: Any,
+        wi: Any,
+        wavelengths: Any,
+        sample1: Any,
+        sample2: Any,
+        active: Any,
+        collapsed: Any = False,
+    ):
+        """(wo, weight = f·cos/pdf per wavelength, pdf, delta, film_terms, film_transmitted) for the next
+        path segment.
 
-        ``film_terms`` are the thin film's partially-coherent reflectance terms at the sampled direction
-        (``combine_film_terms``); the weight uses their incoherent part, the integrator rescales it once the
-        incident coherence is known.
+        ``collapsed``: the path already refracted through a dispersive medium and carries its hero wavelength
+        only (``_hero_collapse``); ``film_terms`` are the thin film's partially-coherent reflectance terms
+        at the sampled direction —
+        or its transmittance terms where ``film_transmitted`` (``combine_film_terms``); the weight uses
+        their incoherent part, the integrator rescales it once the incident coherence is known.
         """
         mi = self.mi
         kind = self.kind(material)
@@ -197,30 +226,41 @@ class MaterialKernels:
             )
             state = _take(front & (kind == int(mat.MaterialKind.MIRROR)), mirror, state)
         if mat.MaterialKind.DIELECTRIC in self.kinds:
-            d_wo, d_weight = self._dielectric_sample(material, wi, wavelengths, sample1)
+            d_wo, d_weight = self._dielectric_sample(material, wi, wavelengths, sample1, collapsed)
             glass = (d_wo, d_weight, mi.Float(1.0), mi.Bool(True))
             state = _take(active & (kind == int(mat.MaterialKind.DIELECTRIC)), glass, state)
         for index, surface in self._per_material(mat.MaterialKind.ROUGH_CONDUCTOR):
             sampled = self._rough_sample(material, surface, wi, wavelengths, sample1, sample2, None)
             state = _take(front & (material == index), sampled, state)
+        film_transmitted = mi.Bool(False)
         for index, surface in self._per_material(mat.MaterialKind.THIN_FILM):
-            is_this = front & (material == index)
-            terms_out: list = []
-            sampled = self._rough_sample(material, surface, wi, wavelengths, sample1, sample2, terms_out)
+            if self.materials.records[index].values.get(mat.FILM_TRANSMITS, 0.0) > 0.5:
+                is_this = active & (material == index) & (wi.z != 0)
+                sampled, terms, transmitted = self._coated_dielectric_sample(
+                    material, surface, wi, wavelengths, sample1, sample2, collapsed
+                )
+                film_transmitted = dr.select(is_this, transmitted, film_transmitted)
+            else:
+                is_this = front & (material == index)
+                terms_out: list = []
+                sampled = self._rough_sample(material, surface, wi, wavelengths, sample1, sample2, terms_out)
+                terms = terms_out[0]
             state = _take(is_this, sampled, state)
-            for slot, term in enumerate(terms_out[0]):
+            for slot, term in enumerate(terms):
                 film_terms[slot] = dr.select(is_this, term, film_terms[slot])
         for index, surface in self._per_material(mat.MaterialKind.ROUGH_DIELECTRIC):
-            sampled = self._rough_dielectric_sample(material, surface, wi, wavelengths, sample1, sample2)
+            sampled = self._rough_dielectric_sample(
+                material, surface, wi, wavelengths, sample1, sample2, collapsed
+            )
             state = _take(active & (material == index) & (wi.z != 0), sampled, state)
         for index, grating in self._per_material(mat.MaterialKind.GRATING):
             sampled = self._grating_sample(material, grating, wi, wavelengths, sample1, sample2)
             state = _take(front & (material == index), sampled, state)
         wo, weight, pdf, delta = state
-        return wo, dr.select(active, weight, 0.0), pdf, delta, film_terms
+        return wo, dr.select(active, weight, 0.0), pdf, delta, film_terms, film_transmitted
 
     # ---------------------------------------------------------------- smooth dielectric
-    def _dielectric_sample(self, material: Any, wi: Any, wavelengths: Any, sample1: Any):
+    def _dielectric_sample(self, material: Any, wi: Any, wavelengths: Any, sample1: Any, collapsed: Any):
         """Smooth dielectric (Dirac): reflect or refract with probability F of the hero wavelength.
 
         A dispersive index bends each wavelength differently, so after a refraction only the hero
@@ -233,15 +273,82 @@ class MaterialKernels:
         eta_ti = dr.select(wi.z >= 0, eta, dr.rcp(eta))
         reflectance, cos_t = fresnel_dielectric(wi.z, eta_ti, OPS)
         reflect = sample1 <= reflectance
-        refracted = mi.Vector3f(-wi.x / eta_ti, -wi.y / eta_ti, -dr.mulsign(cos_t, wi.z))
-        wo = dr.select(reflect, mi.reflect(wi), refracted)
-        collapse = ~reflect & (self.param(material, mat.DISPERSIVE) > 0.5)
-        weight = mi.Spectrum(1.0)
-        weight[0] = dr.select(collapse, float(len(wavelengths)), 1.0)
-        for j in range(1, len(wavelengths)):
-            weight[j] = dr.select(collapse, 0.0, 1.0)
+        wo = dr.select(reflect, mi.reflect(wi), _refract(mi, wi, eta_ti, cos_t))
+        weight = self._hero_collapse(mi.Spectrum(1.0), material, ~reflect & ~collapsed)
         weight = dr.select(reflect, weight, weight * dr.square(dr.rcp(eta_ti)))
         return wo, weight
+
+    def _hero_collapse(self, weight: Any, material: Any, refracted: Any) -> Any:
+        """After a refraction through a dispersive medium only the hero wavelength's path is valid: its
+        weight gains the factor 4 (its share of the four-wavelength pdf), the others are zeroed. Once per
+        path: callers pass ``refracted & ~collapsed`` (a second factor 4 would bias the estimate 4×)."""
+        collapse = refracted & (self.param(material, mat.DISPERSIVE) > 0.5)
+        result = self.mi.Spectrum(weight)
+        result[0] = dr.select(collapse, weight[0] * len(result), weight[0])
+        for j in range(1, len(result)):
+            result[j] = dr.select(collapse, 0.0, weight[j])
+        return result
+
+    # ---------------------------------------------------------------- thin film on a dielectric
+    def _coated_dielectric_sample(
+        self,
+        material: Any,
+        surface: rough_surface.RoughSurface,
+        wi: Any,
+        wavelengths: Any,
+        sample1: Any,
+        sample2: Any,
+        collapsed: Any,
+    ) -> tuple[tuple[Any, Any, Any, Any], list[Any], Any]:
+        """A film on a dielectric substrate reflects with R(V) and transmits T(V) = 1 − R(V)
+        (``thin_film.transmission_terms``): ((wo, weight, pdf, delta), film terms, transmitted).
+
+        From the exterior (wi.z > 0) reflect with probability R_incoherent(λ_hero), as the rough film does
+        (specular part and Eq. 15 lobe), else refract specularly into the substrate; from the substrate
+        the exterior-side angle follows from n_s sin θ_s = n_0 sin θ_0 through the stack (beyond the
+        critical angle all light is reflected) and reflection and transmission are specular. A lossless
+        stack has the same R from both sides (exact in the coherent and incoherent limits), so the
+        exterior-side terms serve both. The film's roughness scatters reflected light only.
+        """
+        mi = self.mi
+        exterior = self.param(material, mat.EXTERIOR_IOR)
+        eta = self.spectrum(material, mat.ETA_ID, wavelengths)[0] / exterior
+        outside = wi.z > 0
+        eta_ti = dr.select(outside, eta, dr.rcp(eta))  # n_transmitted / n_incident (hero)
+        _, cos_t = fresnel_dielectric(wi.z, eta_ti, OPS)
+        cos_i = dr.abs(wi.z)
+        total_internal = ~outside & (dr.square(eta_ti) < 1.0 - dr.square(cos_i))
+        cos_exterior = dr.select(outside, cos_i, cos_t)
+        terms = self.film_terms(material, cos_exterior, wavelengths)
+        reflectance = dr.select(total_internal, 1.0, terms[0])
+        reflect_probability = reflectance[0]
+        reflect = sample1 < reflect_probability
+        # exterior reflection: the rough film's own sampling with the remaining uniform
+        lobe_terms: list = []
+        u_reflect = dr.clip(sample1 / dr.maximum(reflect_probability, 1e-12), 0.0, 0.999999)
+        r_wo, r_weight, r_pdf, r_delta = self._rough_sample(
+            material, surface, wi, wavelengths, u_reflect, sample2, lobe_terms
+        )
+        r_weight = r_weight / dr.maximum(reflect_probability, 1e-12)
+        # substrate-side reflection: specular, R/R_hero
+        inner_weight = reflectance / dr.maximum(reflect_probability, 1e-12)
+        # transmission: specular refraction with T/T_hero and the radiance factor (n_camera/n_light)²
+        transmittance = 1.0 - reflectance
+        t_weight = transmittance / dr.maximum(1.0 - reflect_probability, 1e-12) * dr.square(dr.rcp(eta_ti))
+        t_weight = self._hero_collapse(t_weight, material, ~collapsed)
+        wo = dr.select(reflect, dr.select(outside, r_wo, mi.reflect(wi)), _refract(mi, wi, eta_ti, cos_t))
+        weight = dr.select(reflect, dr.select(outside, r_weight, inner_weight), t_weight)
+        pdf = dr.select(reflect & outside, r_pdf, 1.0)
+        delta = dr.select(reflect & outside, r_delta, True)
+        no_interference = [mi.Spectrum(1.0 if slot == 0 else 0.0) for slot in range(len(terms))]
+        inner_terms = [dr.select(total_internal, a, b) for a, b in zip(no_interference, terms, strict=True)]
+        reflected_terms = [dr.select(outside, a, b) for a, b in zip(lobe_terms[0], inner_terms, strict=True)]
+        transmitted = ~reflect
+        chosen = [
+            dr.select(transmitted, a, b)
+            for a, b in zip(transmission_terms(terms), reflected_terms, strict=True)
+        ]
+        return (wo, weight, pdf, delta), chosen, transmitted
 
     # ---------------------------------------------------------------- rough statistical surface (Eq. 15)
     def _rough_eval(
@@ -404,6 +511,7 @@ class MaterialKernels:
         wavelengths: Any,
         sample1: Any,
         sample2: Any,
+        collapsed: Any,
     ) -> tuple[Any, Any, Any, Any]:
         """Reflect with probability R(λ_hero) else transmit; within each, the specular (delta) part with
         probability e^{−g}, else an exact PSD-lobe sample. Dispersive media keep the hero wavelength only
@@ -472,10 +580,7 @@ class MaterialKernels:
                 / dr.maximum((1.0 - reflectance_hero) * specular_probability, 1e-20)
             )
             specular_weight[j] = dr.select(reflect, reflected_part, transmitted_part)
-        collapse = specular & ~reflect & (self.param(material, mat.DISPERSIVE) > 0.5)
-        specular_weight[0] = dr.select(collapse, specular_weight[0] * len(wavelengths), specular_weight[0])
-        for j in range(1, len(wavelengths)):
-            specular_weight[j] = dr.select(collapse, 0.0, specular_weight[j])
+        specular_weight = self._hero_collapse(specular_weight, material, specular & ~reflect & ~collapsed)
         weight = dr.select(
             specular, specular_weight, dr.select(lobe_valid & (lobe_pdf > 0), lobe_weight, 0.0)
         )
@@ -586,6 +691,11 @@ class MaterialKernels:
         )
         pdf = dr.select(choose_specular, 1.0, lobe_pdf)
         return wo, weight, pdf, choose_specular
+
+
+def _refract(mi: Any, wi: Any, eta_ti: Any, cos_t: Any) -> Any:
+    """Snell refraction of ``wi`` (local frame) with relative index η_ti = n_t/n_i and |cos θ_t|."""
+    return mi.Vector3f(-wi.x / eta_ti, -wi.y / eta_ti, -dr.mulsign(cos_t, wi.z))
 
 
 def _take(mask: Any, sampled: tuple, state: tuple) -> tuple:

@@ -16,13 +16,18 @@ leaves a *pending* record, resolved at the next non-specular vertex or emitter h
 * ``film_separation``: for a thin-film vertex, the separation τ·n̂ (m) between the film's two interfaces,
   also carried through the chain, and its partially-coherent reflectance terms (linear in the visibilities).
 
-At resolution the source is the emitter (whole emitter, BRIEF) or the next vertex's scattering region
-(Theorem 5.1(ii): the scattered shape depends only on the ensemble-averaged reflectivity over that region;
-a uniform disk of radius ``scattering_region_radius_m``, see docs/physics.md).
+At resolution the source is the emitter (whole emitter, BRIEF) or a non-specular surface: a *secondary*
+incoherent source whose extent is the part of that surface that is lit and seen from the receiver (van
+Cittert–Zernike, docs/physics.md §7). Its points are mutually incoherent, so each path, which reaches one
+point of it, carries a point source (Σ⊥ = 0, phase along the sampled direction); averaging the paths
+gives the partially coherent response of the whole lit patch. A material's explicit
+``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane.
 
 Diagnostics (BRIEF): M = (k/r)²Σ⊥ at λ = 550 nm of the light incident at the first non-specular vertex,
-luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, all later
-contributions the resolved Σ⊥ of the first vertex's indirect light.
+luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, light
+from emitters hit by BSDF sampling the emitter's Σ⊥, light from secondary sources the VCZ estimate of
+``output.secondary_source_m``: the luminance-weighted covariance of the directions the pixel's paths
+receive it from (per-sample sums ``vcz_*``).
 """
 
 from __future__ import annotations
@@ -81,6 +86,11 @@ class PathResult:
     diag_r: Any
     diag_cos2: Any
     diag_sin2: Any
+    # Light from secondary sources (non-specular surfaces without a region override): its luminance, that
+    # times r, and the direction (camera coordinates: right, up, forward) it arrives from at the first vertex.
+    vcz_weight: Any
+    vcz_r: Any
+    vcz_direction: Any
     depth_m: Any
     normal: Any
     albedo: Any
@@ -147,14 +157,30 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         return mi.Vector3f(*x_axis), mi.Vector3f(*y_axis)
 
     def _scattering_region(self, material: Any, normal: Any, frame_x: Any, frame_y: Any):
-        """Σ⊥ of a non-specular vertex's scattering region (uniform disk in the tangent plane), in the
-        frame ⟂ to the direction it is seen along (the projection depends on that frame only)."""
+        """(Σ⊥, overridden) of the secondary source a path reaches at a non-specular vertex, in the frame ⟂
+        to the direction it is seen along.
+
+        Without an override the path carries one point of the lit patch (Σ⊥ = 0; the patch's extent comes
+        from averaging paths, module docstring); with ``scattering_region_radius_m`` a uniform disk of that
+        radius in the tangent plane (the projection depends on the frame only).
+        """
         radius = self.kernels.param(material, mat.SCATTERING_REGION_RADIUS_M)
-        return sources.disk_covariance_components(
+        sigma = sources.disk_covariance_components(
             radius,
             (normal.x, normal.y, normal.z),
             (frame_x.x, frame_x.y, frame_x.z),
             (frame_y.x, frame_y.y, frame_y.z),
+        )
+        return sigma, radius > 0.0
+
+    def _camera_coordinates(self, direction: Any) -> Any:
+        """``direction`` in the camera's (right, up, forward) basis (orthonormal: covariances are kept)."""
+        context = self.context
+        forward = dr.cross(context.camera_right, context.camera_up)
+        return mi.Vector3f(
+            dr.dot(direction, context.camera_right),
+            dr.dot(direction, context.camera_up),
+            dr.dot(direction, forward),
         )
 
     def _emitter_lookup(self, emitter_ptr: Any) -> Any:
@@ -226,6 +252,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
         eta_scale = mi.Float(1.0)
+        collapsed = mi.Bool(False)  # only the hero wavelength is left (dispersive refraction)
         depth = mi.UInt32(0)
         prev_si = dr.zeros(mi.SurfaceInteraction3f)
         prev_pdf = mi.Float(1.0)
@@ -240,6 +267,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         first_frame_x = mi.Vector3f(0.0)
         first_frame_y = mi.Vector3f(0.0)
         film_pending = mi.Bool(False)
+        film_transmitted = mi.Bool(False)
         film_separation = mi.Vector3f(0.0)
         film_material = mi.UInt32(0)
         film_position = mi.Point3f(0.0)
@@ -262,6 +290,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         d_r = mi.Float(0.0)
         d_c2 = mi.Float(0.0)
         d_s2 = mi.Float(0.0)
+        # light from secondary sources (VCZ estimate from the spread of its arrival directions)
+        ind_vcz = mi.Bool(False)
+        first_direction = mi.Vector3f(0.0, 0.0, 1.0)
+        v_w = mi.Float(0.0)
+        v_r = mi.Float(0.0)
         aov_depth = mi.Float(0.0)
         aov_normal = mi.Vector3f(0.0)
         aov_material = mi.UInt32(self.context.black_material)
@@ -288,8 +321,41 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             aov_normal = dr.select(first, si.sh_frame.n, aov_normal)
             aov_material = dr.select(first, material, aov_material)
 
+            # --- shading frame (two-sided except for interfaces that transmit)
+            frame = mi.Frame3f(si.sh_frame)
+            wi_world = -ray.d
+            flip = (dr.dot(wi_world, frame.n) < 0) & self.kernels.two_sided(material)
+            frame.n = dr.select(flip, -frame.n, frame.n)
+            frame.t = dr.select(flip, -frame.t, frame.t)
+            wi = frame.to_local(wi_world)
+            continue_path = nonspecular | specular
+            continue_path &= depth + 1 < self.max_depth
+
+            # --- sample the next direction (random numbers drawn in the order: NEE, then material)
+            nee_sample = sampler.next_2d(continue_path & nonspecular)
+            wo, weight, pdf, delta, sampled_film_terms, sampled_film_transmitted = self.kernels.sample(
+                material,
+                wi,
+                wavelengths,
+                sampler.next_1d(continue_path),
+                sampler.next_2d(continue_path),
+                continue_path,
+                collapsed,
+            )
+            wo_world = frame.to_world(wo)
+            # A Dirac refraction through a dispersive medium leaves the hero wavelength only (bsdfs).
+            refracted = continue_path & delta & (wi.z * wo.z < 0)
+            collapsed |= refracted & (self.kernels.param(material, mat.DISPERSIVE) > 0.5)
+            # A film on glass reflecting or refracting specularly keeps a pending record's coherence, like
+            # smooth glass (the coated ball's far side passes on the light it transmits); its own
+            # interference then uses the incoherent sum it was sampled with.
+            film_passthrough = mi.Bool(False)
+            if has_film:
+                film_passthrough = nonspecular & pending & delta
+                film_passthrough &= self.kernels.param(material, mat.FILM_TRANSMITS) > 0.5
+
             # --- resolve the pending vertex's incident coherence: the source is what we just reached
-            resolve = pending & (hit_emitter | nonspecular)
+            resolve = pending & (hit_emitter | (nonspecular & ~film_passthrough))
             em_record = self._emitter_lookup(emitter_ptr)
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
@@ -301,7 +367,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                     frame_x,
                     frame_y,
                 )
-                sr_xx, sr_xy, sr_yy = self._scattering_region(material, si.n, frame_x, frame_y)
+                (sr_xx, sr_xy, sr_yy), overridden = self._scattering_region(material, si.n, frame_x, frame_y)
                 src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
                 src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
                 src_yy = dr.select(hit_emitter, em_syy, sr_yy)
@@ -323,7 +389,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 if has_film:
                     # An emitter reached straight from the film: its interference phase is taken towards the
                     # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
-                    centre_phase = hit_emitter & ~chain_specular
+                    centre_phase = hit_emitter & ~chain_specular & ~film_transmitted
                     _, emitter_to_film = emitter_direction(
                         mi, self.context.emitter_flat, em_record, film_position
                     )
@@ -336,7 +402,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                         phase_terms,
                         lambda d, c=resolved, v=film_separation: self.visibility(c, v * d, wavelengths),
                     )
-                    film_factor = film_factor / dr.maximum(film_terms[0], 1e-12)
+                    # The path was sampled with the incoherent part at its own direction: apply the relative
+                    # interference modulation R(V)/R_incoherent of the phase direction.
+                    film_factor = film_factor / dr.maximum(phase_terms[0], 1e-12)
                     beta = dr.select(resolve & film_pending, beta * film_factor, beta)
                 record_indirect = resolve & pending_first
                 scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(chain_distance, 1e-9))
@@ -347,6 +415,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 ind_r = dr.select(record_indirect, chain_distance, ind_r)
                 ind_c2 = dr.select(record_indirect, c2, ind_c2)
                 ind_s2 = dr.select(record_indirect, s2, ind_s2)
+                ind_vcz = dr.select(record_indirect, ~hit_emitter & ~overridden, ind_vcz)
                 indirect_ready |= record_indirect
             pending &= ~resolve
             film_pending &= ~resolve
@@ -360,6 +429,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             L += emitted
             weight_em = _luminance(y_weights, emitted)
             add_indirect = indirect_ready & seen_nonspecular
+            v_w += dr.select(add_indirect & ind_vcz, weight_em, 0.0)
+            v_r += dr.select(add_indirect & ind_vcz, weight_em * ind_r, 0.0)
+            add_indirect &= ~ind_vcz
             d_w += dr.select(add_indirect, weight_em, 0.0)
             d_mxx += dr.select(add_indirect, weight_em * ind_mxx, 0.0)
             d_mxy += dr.select(add_indirect, weight_em * ind_mxy, 0.0)
@@ -368,22 +440,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             d_c2 += dr.select(add_indirect, weight_em * ind_c2, 0.0)
             d_s2 += dr.select(add_indirect, weight_em * ind_s2, 0.0)
 
-            # --- shading frame (two-sided except for dielectrics)
-            frame = mi.Frame3f(si.sh_frame)
-            wi_world = -ray.d
-            two_sided = (kind != int(mat.MaterialKind.DIELECTRIC)) & (
-                kind != int(mat.MaterialKind.ROUGH_DIELECTRIC)
-            )
-            flip = (dr.dot(wi_world, frame.n) < 0) & two_sided
-            frame.n = dr.select(flip, -frame.n, frame.n)
-            frame.t = dr.select(flip, -frame.t, frame.t)
-            wi = frame.to_local(wi_world)
-            continue_path = nonspecular | specular
-            continue_path &= depth + 1 < self.max_depth
-
             # --- next-event estimation at non-specular vertices
             do_nee = continue_path & nonspecular
-            ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(do_nee), True, do_nee)
+            ds_em, em_weight = scene.sample_emitter_direction(si, nee_sample, True, do_nee)
             do_nee &= ds_em.pdf != 0.0
             em_record_nee = self._emitter_lookup(ds_em.emitter)
             nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
@@ -438,6 +497,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             nee_scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(nee_r, 1e-9))
             direct_m = (nee_scale2 * nee_sxx, nee_scale2 * nee_sxy, nee_scale2 * nee_syy)
             use_ind = do_nee & seen_nonspecular & indirect_ready
+            v_w += dr.select(use_ind & ind_vcz, weight_direct, 0.0)
+            v_r += dr.select(use_ind & ind_vcz, weight_direct * ind_r, 0.0)
+            use_ind &= ~ind_vcz
             w_first = dr.select(at_first, weight_direct, 0.0)
             w_later = dr.select(use_ind, weight_direct, 0.0)
             d_w += w_first + w_later
@@ -448,21 +510,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             d_c2 += w_first * nee_c2 + w_later * ind_c2
             d_s2 += w_first * nee_s2 + w_later * ind_s2
 
-            # --- sample the next direction
-            wo, weight, pdf, delta, sampled_film_terms = self.kernels.sample(
-                material,
-                wi,
-                wavelengths,
-                sampler.next_1d(continue_path),
-                sampler.next_2d(continue_path),
-                continue_path,
-            )
-            wo_world = frame.to_world(wo)
             beta = dr.select(continue_path, beta * weight, 0.0)
 
             # Start a new pending record at a non-specular vertex; carry it through specular ones.
             # Without thin films only the first non-specular vertex needs its incident coherence.
-            new_record = continue_path & nonspecular & (~seen_nonspecular | has_film)
+            new_record = continue_path & nonspecular & ~film_passthrough & (~seen_nonspecular | has_film)
             incoming_fx = mi.Vector3f(frame_x)
             incoming_fy = mi.Vector3f(frame_y)
             if new_record:
@@ -471,6 +523,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             frame_y = dr.select(new_record, incoming_fy, frame_y)
             first_frame_x = dr.select(new_record & ~seen_nonspecular, incoming_fx, first_frame_x)
             first_frame_y = dr.select(new_record & ~seen_nonspecular, incoming_fy, first_frame_y)
+            first_direction = dr.select(new_record & ~seen_nonspecular, wo_world, first_direction)
             pending_first = dr.select(new_record, ~seen_nonspecular, pending_first)
             pending |= new_record
             chain_distance = dr.select(new_record, 0.0, chain_distance)
@@ -483,10 +536,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 film_material = dr.select(is_film, material, film_material)
                 film_position = dr.select(is_film, si.p, film_position)
                 film_normal = dr.select(is_film, frame.n, film_normal)
+                film_transmitted = dr.select(is_film, sampled_film_transmitted, film_transmitted)
                 for index in range(film_beams):
                     film_terms[index] = dr.select(is_film, sampled_film_terms[index], film_terms[index])
             # Through a perfect mirror / refraction the carried vectors follow the beam.
-            through_specular = continue_path & specular & pending
+            through_specular = continue_path & (specular | film_passthrough) & pending
             chain_specular = dr.select(new_record, False, chain_specular | through_specular)
             frame_x = dr.select(through_specular, _reflect_vector(frame_x, frame.n), frame_x)
             frame_y = dr.select(through_specular, _reflect_vector(frame_y, frame.n), frame_y)
@@ -511,7 +565,22 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             depth += 1
 
         aov_albedo = self.kernels.albedo(aov_material, wavelengths)
-        return PathResult(L, d_w, d_mxx, d_mxy, d_myy, d_r, d_c2, d_s2, aov_depth, aov_normal, aov_albedo)
+        return PathResult(
+            L,
+            d_w,
+            d_mxx,
+            d_mxy,
+            d_myy,
+            d_r,
+            d_c2,
+            d_s2,
+            v_w,
+            v_r,
+            self._camera_coordinates(first_direction),
+            aov_depth,
+            aov_normal,
+            aov_albedo,
+        )
 
 
 def register() -> None:

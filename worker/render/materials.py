@@ -49,9 +49,11 @@ PIT_IOR = 18
 LOBE_WIDTH_PER_M = 19
 MAX_ORDER = 20
 DISPERSIVE = 21  # 1 when the dielectric index varies with wavelength
-STRIDE = 22
+FILM_TRANSMITS = 22  # 1 for a thin film on a dielectric substrate (reflects and transmits)
+STRIDE = 23
 
-DEFAULT_SCATTERING_REGION_RADIUS_M = 1e-3
+# 0: no override; a non-specular vertex is a secondary source sized by the lit patch (docs/physics.md §7).
+DEFAULT_SCATTERING_REGION_RADIUS_M = 0.0
 
 # Materials whose response is a Dirac delta (coherence kept, r accumulated: paper §5, "Perfectly specular").
 SPECULAR_KINDS = frozenset({MaterialKind.MIRROR, MaterialKind.DIELECTRIC})

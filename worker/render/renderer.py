@@ -188,6 +188,7 @@ class Renderer:
             "diag_r": result.diag_r,
             "diag_c2": result.diag_cos2,
             "diag_s2": result.diag_sin2,
+            **vcz_sums(result.vcz_weight, result.vcz_r, result.vcz_direction),
             "depth": result.depth_m,
             "normal_x": result.normal.x,
             "normal_y": result.normal.y,
@@ -205,6 +206,18 @@ class Renderer:
         reduced += [dr.block_sum(dr.square(v), spp) for v in band_values]
         reduced += [dr.block_sum(per_sample[key], spp) for key in SUM_KEYS]
         return _interleave(mi, reduced)
+
+
+def vcz_sums(weight: Any, weighted_r: Any, direction: Any) -> dict[str, Any]:
+    """Per-sample terms of the secondary-source estimator (``output.secondary_source_m``): the weight w, w²
+    (for the effective sample count), w·r, and w·d, w·ddᵀ of the arrival direction d."""
+    d = (direction.x, direction.y, direction.z)
+    terms = {"vcz_w": weight, "vcz_w2": dr.square(weight), "vcz_r": weighted_r}
+    for i, axis in enumerate("xyz"):
+        terms[f"vcz_d{axis}"] = weight * d[i]
+        for j in range(i, 3):
+            terms[f"vcz_d{axis}{'xyz'[j]}"] = weight * d[i] * d[j]
+    return terms
 
 
 def _interleave(mi: Any, columns: list[Any]) -> Any:

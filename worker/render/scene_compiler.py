@@ -173,6 +173,7 @@ class SceneCompiler:
                 conductor(material.substrate.conductor)
             else:
                 dielectric(material.substrate.ior)
+                values[mat.FILM_TRANSMITS] = 1.0
             return mat.MaterialRecord(mat.MaterialKind.THIN_FILM, values, rough(material)), placeholder
         if kind == "grating":
             conductor(material.conductor)
