@@ -387,9 +387,11 @@ class DiskEmitter(_EmitterBase, DiskGeometry):
     """A one-sided disk emitting on the ``normal`` side."""
 
 
-def _check_rectangle_frame(normal: list[float], up: list[float]) -> None:
-    _check_direction(normal, "normal")
-    _check_direction(up, "up")
+def _check_rectangle_frame(
+    normal: list[float], up: list[float], normal_name: str = "normal", up_name: str = "up"
+) -> None:
+    _check_direction(normal, normal_name)
+    _check_direction(up, up_name)
     cross = [
         up[1] * normal[2] - up[2] * normal[1],
         up[2] * normal[0] - up[0] * normal[2],
@@ -398,7 +400,7 @@ def _check_rectangle_frame(normal: list[float], up: list[float]) -> None:
     if math.fsum(c * c for c in cross) <= 1e-18 * math.fsum(c * c for c in up) * math.fsum(
         c * c for c in normal
     ):
-        raise ValueError("up must not be parallel to normal")
+        raise ValueError(f"{up_name} must not be parallel to {normal_name}")
 
 
 Emitter = Annotated[
@@ -471,6 +473,113 @@ class MeshFileShape(_ShapeBase):
         return check_bundle_relative_path(path, suffixes=(".obj", ".ply"))
 
 
+#: The most segments a procedural shape may have along one parameter (its triangle count is also counted
+#: against ``HGRENDER_MAX_TRIANGLES``).
+MAX_PROCEDURAL_SEGMENTS = 1024
+Segments = Annotated[int, Field(ge=3, le=MAX_PROCEDURAL_SEGMENTS)]
+#: The largest extent (m) of a procedural shape's parameters: a room, not a planet.
+MAX_PROCEDURAL_SIZE_M = 1000.0
+ProceduralLength = Annotated[float, Field(gt=0.0, le=MAX_PROCEDURAL_SIZE_M)]
+
+
+class ShellShape(_ShapeBase):
+    """A beetle-like ribbed ellipsoid (``schemas.procedural.shell``): semi-axes (a, b, c) along the long
+    ``axis``, ``up`` and their cross product; ``rib_count`` lengthwise ribs of relative depth
+    ``rib_depth`` and ``segment_count`` crosswise bands of relative depth ``segment_depth``."""
+
+    type: Literal["shell"]
+    center_m: Vec3
+    semi_axes_m: Annotated[list[ProceduralLength], Field(min_length=3, max_length=3)]
+    axis: Vec3 = Field(default_factory=lambda: [1.0, 0.0, 0.0])
+    up: Vec3 = Field(default_factory=lambda: [0.0, 1.0, 0.0])
+    rib_count: Annotated[int, Field(ge=0, le=256)] = 12
+    rib_depth: Annotated[float, Field(ge=0.0, le=0.3)] = 0.04
+    segment_count: Annotated[int, Field(ge=0, le=256)] = 0
+    segment_depth: Annotated[float, Field(ge=0.0, le=0.3)] = 0.0
+    segments_along: Segments = 96
+    segments_around: Segments = 192
+
+    @model_validator(mode="after")
+    def _frame(self) -> ShellShape:
+        _check_rectangle_frame(self.axis, self.up, normal_name="axis")
+        if self.rib_depth + self.segment_depth >= 0.5:
+            raise ValueError("rib_depth + segment_depth must be below 0.5 (the surface would fold)")
+        return self
+
+
+WavePattern = Literal["waves", "ripples", "egg_crate"]
+
+
+class WavySheetShape(_ShapeBase):
+    """An embossed rectangle (``schemas.procedural.wavy_sheet``): the rectangle of ``RectangleShape``
+    displaced along ``normal`` by ``amplitude_m`` times a ``pattern`` of period ``wavelength_m``."""
+
+    type: Literal["wavy_sheet"]
+    center_m: Vec3
+    normal: Vec3
+    up: Vec3
+    width_m: ProceduralLength
+    height_m: ProceduralLength
+    pattern: WavePattern = "waves"
+    amplitude_m: Annotated[float, Field(ge=0.0, le=MAX_PROCEDURAL_SIZE_M)]
+    wavelength_m: ProceduralLength
+    segments: Segments = 256
+
+    @model_validator(mode="after")
+    def _frame(self) -> WavySheetShape:
+        _check_rectangle_frame(self.normal, self.up)
+        return self
+
+
+class OpticalDiscShape(_ShapeBase):
+    """A CD/DVD (``schemas.procedural.optical_disc``): an annulus whose first tangent is radial, so a
+    ``grating`` material with ``orientation_deg`` 0 has concentric tracks. Defaults: a 120 mm disc with a
+    15 mm hole."""
+
+    type: Literal["optical_disc"]
+    center_m: Vec3
+    normal: Vec3
+    radius_m: ProceduralLength = 0.06
+    inner_radius_m: Annotated[float, Field(ge=0.0, le=MAX_PROCEDURAL_SIZE_M)] = 0.0075
+    segments_radial: Segments = 8
+    segments_around: Segments = 720
+
+    @model_validator(mode="after")
+    def _radii(self) -> OpticalDiscShape:
+        _check_direction(self.normal, "normal")
+        if self.inner_radius_m >= self.radius_m:
+            raise ValueError("inner_radius_m must be smaller than radius_m")
+        return self
+
+
+class BackdropShape(_ShapeBase):
+    """A photographer's cyclorama (``schemas.procedural.backdrop``): a floor ``width_m`` × ``depth_m``
+    centred at ``floor_center_m``, bending up along a quarter cylinder of ``cove_radius_m`` into a wall of
+    ``height_m`` behind it; it opens towards ``facing`` (projected ⟂ ``up``)."""
+
+    type: Literal["backdrop"]
+    floor_center_m: Vec3
+    facing: Vec3
+    up: Vec3 = Field(default_factory=lambda: [0.0, 1.0, 0.0])
+    width_m: ProceduralLength
+    depth_m: ProceduralLength
+    height_m: ProceduralLength
+    cove_radius_m: ProceduralLength
+    segments: Segments = 24
+
+    @model_validator(mode="after")
+    def _frame(self) -> BackdropShape:
+        _check_rectangle_frame(self.up, self.facing, normal_name="up", up_name="facing")
+        if self.cove_radius_m >= self.height_m:
+            raise ValueError("cove_radius_m must be smaller than height_m")
+        return self
+
+
+#: Shapes whose triangles ``schemas.procedural`` generates from their parameters.
+ProceduralShape = ShellShape | WavySheetShape | OpticalDiscShape | BackdropShape
+PROCEDURAL_SHAPE_TYPES = (ShellShape, WavySheetShape, OpticalDiscShape, BackdropShape)
+
+
 def check_bundle_relative_path(path: str, suffixes: tuple[str, ...] | None = None) -> str:
     """Reject anything that could leave the bundle directory: absolute paths, ``..``, URLs, drives."""
     if "\\" in path or "\x00" in path:
@@ -487,7 +596,16 @@ def check_bundle_relative_path(path: str, suffixes: tuple[str, ...] | None = Non
 
 
 Shape = Annotated[
-    SphereShape | CylinderShape | RectangleShape | DiskShape | MeshShape | MeshFileShape,
+    SphereShape
+    | CylinderShape
+    | RectangleShape
+    | DiskShape
+    | MeshShape
+    | MeshFileShape
+    | ShellShape
+    | WavySheetShape
+    | OpticalDiscShape
+    | BackdropShape,
     Field(discriminator="type"),
 ]
 

@@ -8,7 +8,9 @@ Standard data written (units: stage units = metres):
 * camera → ``UsdGeom.Camera``; horizontalAperture/focalLength in tenths of a scene unit (USD's lens units),
   so a 36 mm aperture is 0.36 at 1 m per unit; clippingRange = (near_clip_m, far_clip_m).
 * sphere / cylinder shapes → ``UsdGeom.Sphere`` / ``UsdGeom.Cylinder`` (axis Z) placed by xform ops;
-  rectangle, disk (48-gon) and inline meshes → ``UsdGeom.Mesh``; mesh files → an ``Xform`` with ``hg:path``.
+  rectangle, disk (48-gon), inline meshes and procedural shapes (shell, wavy sheet, optical disc, backdrop:
+  the generated triangles, vertex normals and ``st`` texture coordinates) → ``UsdGeom.Mesh``; mesh files →
+  an ``Xform`` with ``hg:path``.
 * emitters → ``UsdLux`` Sphere/Cylinder/Rect/Disk lights, ``inputs:intensity`` = the emitter's luminance in
   nits (K_m·c·∫ s ȳ dλ, :mod:`schemas.photometry`), colour white, exposure 0, normalize off.
 * materials → ``UsdShade.Material`` with a ``UsdPreviewSurface`` approximating the look, plus ``hg:id``.
@@ -27,7 +29,9 @@ import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils, Vt
 
 from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_scale, reflectance_rgb
+from schemas.procedural import generate_mesh
 from schemas.scene import (
+    PROCEDURAL_SHAPE_TYPES,
     CylinderEmitter,
     CylinderShape,
     DielectricMaterial,
@@ -215,6 +219,22 @@ def _write_shape(stage: Usd.Stage, path: str, shape: Any) -> UsdGeom.Xformable:
         if shape.normals is not None:
             geometry.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(shape.normals, dtype=np.float32)))
             geometry.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    elif isinstance(shape, PROCEDURAL_SHAPE_TYPES):
+        geometry = UsdGeom.Mesh.Define(stage, path)
+        placement = np.eye(4)
+        generated = generate_mesh(shape)
+        _author_mesh(
+            geometry,
+            generated.vertices_m,
+            [3] * len(generated.triangles),
+            generated.triangles.ravel().tolist(),
+        )
+        geometry.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(generated.normals.astype(np.float32)))
+        geometry.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        texcoords = UsdGeom.PrimvarsAPI(geometry).CreatePrimvar(
+            "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+        )
+        texcoords.Set(Vt.Vec2fArray.FromNumpy(generated.uvs.astype(np.float32)))
     elif isinstance(shape, MeshFileShape):
         geometry = UsdGeom.Xform.Define(stage, path)
         placement = np.eye(4)

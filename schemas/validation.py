@@ -9,7 +9,8 @@ from pydantic import ValidationError
 
 from schemas.errors import SceneError, SceneProblem, json_pointer
 from schemas.limits import SceneLimits
-from schemas.scene import MeshShape, Scene
+from schemas.procedural import mesh_size
+from schemas.scene import PROCEDURAL_SHAPE_TYPES, MeshShape, Scene
 
 
 def _pointer_for(data: Any, loc: tuple[str | int, ...], error_type: str) -> str:
@@ -62,6 +63,7 @@ def check_limits(scene: Scene, limits: SceneLimits) -> list[SceneProblem]:
     """Problems where a structurally valid scene exceeds the deployment's resource limits."""
     film = scene.film
     meshes = [shape for shape in scene.shapes if isinstance(shape, MeshShape)]
+    procedural = [mesh_size(shape) for shape in scene.shapes if isinstance(shape, PROCEDURAL_SHAPE_TYPES)]
     return [
         *_limit_problem("/film/width", "width", film.width, limits.max_resolution, "HGRENDER_MAX_RESOLUTION"),
         *_limit_problem(
@@ -82,14 +84,14 @@ def check_limits(scene: Scene, limits: SceneLimits) -> list[SceneProblem]:
         *_limit_problem(
             "/shapes",
             "triangle count",
-            sum(len(mesh.indices) for mesh in meshes),
+            sum(len(mesh.indices) for mesh in meshes) + sum(triangles for _, triangles in procedural),
             limits.max_triangles,
             "HGRENDER_MAX_TRIANGLES",
         ),
         *_limit_problem(
             "/shapes",
             "vertex count",
-            sum(len(mesh.vertices_m) for mesh in meshes),
+            sum(len(mesh.vertices_m) for mesh in meshes) + sum(vertices for vertices, _ in procedural),
             limits.max_vertices,
             "HGRENDER_MAX_VERTICES",
         ),

@@ -24,6 +24,7 @@ from hgcore.optics.grating import BinaryGrating
 from hgcore.optics.rough_surface import RoughSurface
 from schemas import scene as model
 from schemas.photometry import evaluate_spectrum
+from schemas.procedural import GENERATORS, generate_mesh
 from worker.render import materials as mat
 from worker.render.emitters import EmitterKind, EmitterRecord, EmitterTable
 from worker.render.spectral import SpectralTable, grid_wavelengths_nm
@@ -226,7 +227,7 @@ class SceneCompiler:
         if kind == "disk":
             own = _frame_matrix(shape.center_m, shape.normal, None, shape.radius_m, shape.radius_m)
             return {"type": "disk", "to_world": _compose(mi, shape.transform, own)}
-        if kind == "mesh":
+        if kind == "mesh" or kind in GENERATORS:
             return self._inline_mesh(shape)
         if kind == "mesh_file":
             if self.bundle_dir is None:
@@ -242,26 +243,42 @@ class SceneCompiler:
         raise ValueError(f"shapes: type {kind!r} is not supported by the renderer")
 
     def _inline_mesh(self, shape: Any) -> Any:
+        """An ``mi.Mesh`` of an inline or procedural mesh, the shape's transform applied to its vertices.
+
+        Procedural meshes carry texture coordinates: Mitsuba's first shading tangent follows ∂p/∂u, which
+        is what orients anisotropic materials (an optical disc's concentric grating tracks).
+        """
         mi = self.mi
-        vertices = np.asarray(shape.vertices_m, dtype=np.float32)
-        faces = np.asarray(shape.indices, dtype=np.uint32)
+        if shape.type == "mesh":
+            vertices = np.asarray(shape.vertices_m, dtype=np.float64)
+            faces = np.asarray(shape.indices, dtype=np.uint32)
+            normals = None if shape.normals is None else np.asarray(shape.normals, dtype=np.float64)
+            uvs = None
+        else:
+            generated = generate_mesh(shape)
+            vertices, faces = generated.vertices_m, generated.triangles.astype(np.uint32)
+            normals, uvs = generated.normals, generated.uvs
+        if shape.transform is not None:
+            matrix = np.asarray(shape.transform.to_matrix())
+            vertices = vertices @ matrix[:3, :3].T + matrix[:3, 3]
+            if normals is not None:  # normals transform by the inverse transpose
+                normals = normals @ np.linalg.inv(matrix[:3, :3])
+                normals /= np.linalg.norm(normals, axis=1, keepdims=True)
         mesh = mi.Mesh(
             "inline",
             vertex_count=len(vertices),
             face_count=len(faces),
-            has_vertex_normals=shape.normals is not None,
+            has_vertex_normals=normals is not None,
+            has_vertex_texcoords=uvs is not None,
         )
         params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(vertices.ravel())
+        params["vertex_positions"] = mi.Float(vertices.astype(np.float32).ravel())
         params["faces"] = mi.UInt32(faces.ravel())
-        if shape.normals is not None:
-            params["vertex_normals"] = mi.Float(np.asarray(shape.normals, dtype=np.float32).ravel())
+        if normals is not None:
+            params["vertex_normals"] = mi.Float(normals.astype(np.float32).ravel())
+        if uvs is not None:
+            params["vertex_texcoords"] = mi.Float(uvs.astype(np.float32).ravel())
         params.update()
-        if shape.transform is not None:
-            matrix = np.asarray(shape.transform.to_matrix())
-            moved = vertices @ matrix[:3, :3].T + matrix[:3, 3]
-            params["vertex_positions"] = mi.Float(moved.astype(np.float32).ravel())
-            params.update()
         return mesh
 
     def _emitter(self, emitter: Any, film: model.Film) -> tuple[dict[str, Any], EmitterRecord, float]:
