@@ -255,6 +255,9 @@ def degree_of_coherence(
     lambda_major, lambda_minor, cos_phi, sin_phi = principal_axes_components(
         sigma_xx, sigma_xy, sigma_yy, ops
     )
+    # Σ⊥ = 0 (a point source; lanes that carry no coherence) makes λ₂ = 0/0, and a rank-one Σ⊥ can round
+    # to det < 0 in float32: both are u = 0 along that axis (fully coherent), not NaN.
+    lambda_minor = ops.where(lambda_major > 0.0, ops.maximum(lambda_minor, 0.0), 0.0)
     u_major = ops.sqrt(lambda_major) * (cos_phi * x_frequency + sin_phi * y_frequency)
     u_minor = ops.sqrt(lambda_minor) * (cos_phi * y_frequency - sin_phi * x_frequency)
     degree = max_degree(coefficients)

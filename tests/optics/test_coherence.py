@@ -215,3 +215,19 @@ def test_drjit_degree_of_coherence_and_diagnostics_equal_numpy() -> None:
         assert float(dr.ravel(getattr(jit_diag, name))[0]) == pytest.approx(
             getattr(reference_diag, name), rel=1e-5
         )
+
+
+@pytest.mark.parametrize("source", ["disk", "rect"])
+def test_degenerate_covariance_is_fully_coherent_along_its_null_axis_not_nan(source: str) -> None:
+    """Σ⊥ = 0 (a point source) gives μ = 1 everywhere; a rank-one Σ⊥ (a line source seen end-on, det rounded
+    below 0) gives μ along its null axis = μ(0) = 1: the HG sum at u = 0, which the normalisation fixes."""
+    coefficients = source_coefficients(source, 16)
+    xi = (np.array([0.0, 3e-6, 0.0]), np.array([0.0, 0.0, 3e-6]))
+    zero = np.zeros(3)
+    np.testing.assert_allclose(
+        degree_of_coherence(xi, (zero, zero, zero), 1.0, WAVELENGTH_M, coefficients), 1.0, atol=1e-12
+    )
+    rank_one = (np.full(3, 1e-6), zero, np.full(3, -1e-22))  # Σ_yy a rounding error below 0
+    mu = degree_of_coherence(xi, rank_one, 1.0, WAVELENGTH_M, coefficients)
+    assert np.all(np.isfinite(mu))
+    assert mu[2] == pytest.approx(1.0, abs=1e-12)  # separation along the null (y) axis
