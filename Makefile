@@ -9,7 +9,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 DATA_DIR ?= ./data
 
-.PHONY: setup system-packages venv serve test test-fast lint format bench web clean
+.PHONY: setup system-packages venv serve test test-fast lint format bench gallery web clean
 
 setup: system-packages $(VENV)/.installed
 
@@ -53,6 +53,11 @@ test-fast: venv
 bench: setup
 	@$(MAKE) --no-print-directory system-packages SYSTEM_PACKAGES=wrk
 	$(PY) -m bench
+
+# Every gallery scene at publication quality (512², GALLERY_SPP) into gallery/<name>/ and docs/gallery.md.
+GALLERY_SPP ?= 256
+gallery: setup
+	$(PY) -m worker.gallery --size 512 --spp $(GALLERY_SPP)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

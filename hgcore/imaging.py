@@ -51,3 +51,22 @@ def auto_exposure_ev(linear_rgb: np.ndarray, percentile: float = 99.0) -> float:
     luminance = np.asarray(linear_rgb, dtype=np.float64) @ REC709_LUMINANCE
     high = float(np.percentile(luminance, percentile))
     return 0.0 if high <= 0 or not math.isfinite(high) else -math.log2(high)
+
+
+#: The share of pixels whose brightest channel the preview lets clip (``preview_exposure_ev``).
+PREVIEW_CLIPPED_FRACTION = 0.002
+
+
+def preview_exposure_ev(linear_rgb: np.ndarray, clipped_fraction: float = PREVIEW_CLIPPED_FRACTION) -> float:
+    """EV of ``preview.png``: the (1 − clipped_fraction) quantile of each pixel's *brightest channel*
+    max(R, G, B) maps to 1 (0 for a black image).
+
+    Why the brightest channel and not luminance (``auto_exposure_ev``, the viewer's default): a saturated
+    highlight — an interference colour, a diffraction order — has a luminance well below its largest
+    channel, so mapping luminance to 1 clips that channel and washes the colour out towards white. With
+    this rule at most ``clipped_fraction`` of the pixels (0.2 %: the emitter seen directly, glints) have
+    any channel clipped, and every other pixel keeps its hue and saturation under the ``clamp`` tone map.
+    """
+    brightest = np.max(np.maximum(np.asarray(linear_rgb, dtype=np.float64), 0.0), axis=-1)
+    high = float(np.quantile(brightest, 1.0 - clipped_fraction))
+    return 0.0 if high <= 0 or not math.isfinite(high) else -math.log2(high)

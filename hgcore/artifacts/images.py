@@ -38,7 +38,7 @@ from hgcore.artifacts.layout import (
 from hgcore.artifacts.pixel_sums import PixelSums
 from hgcore.colour import band_edges_xyz_weights, xyz_to_linear_srgb, y_bar_integral_nm
 from hgcore.files import atomic_write_bytes
-from hgcore.imaging import auto_exposure_ev, display_rgb8
+from hgcore.imaging import display_rgb8, preview_exposure_ev
 from hgcore.optics.coherence import diagnostics_components, principal_axes_components
 from hgcore.optics.frames import transverse_frame_components
 
@@ -198,10 +198,13 @@ def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path
 
 
 def preview_png(rgb: np.ndarray) -> bytes:
+    """8-bit sRGB PNG at :func:`hgcore.imaging.preview_exposure_ev` (highlight colours unclipped), ``clamp``
+    tone map. The viewer opens at ``auto_exposure_ev`` instead (luminance p99, docs/viewer.md), which is
+    brighter on scenes whose highlights are saturated colours."""
     from PIL import Image
 
     buffer = io.BytesIO()
-    Image.fromarray(display_rgb8(rgb, auto_exposure_ev(rgb))).save(buffer, format="PNG")
+    Image.fromarray(display_rgb8(rgb, preview_exposure_ev(rgb))).save(buffer, format="PNG")
     return buffer.getvalue()
 
 

@@ -29,6 +29,17 @@ EXPECTED_EXAMPLES = {
     "rough_metals.json",
     "mirror_coherence.json",
 }
+#: The gallery scenes (worker/gallery.py, docs/gallery.md): their own film shows the phenomenon.
+GALLERY_EXAMPLES = {
+    "fig1f_dvd_small_source.json",
+    "fig1f_dvd_large_source.json",
+    "fig7_thin_film_sphere_light.json",
+    "fig7_thin_film_cylinder_light.json",
+    "fig8_mirror_coherence.json",
+    "fig9_modes_1.json",
+    "fig9_modes_16.json",
+    "fig1de_rough_metals.json",
+}
 
 
 def minimal_scene() -> dict[str, Any]:
@@ -56,15 +67,25 @@ def problems_of(data: Any, limits: SceneLimits | None = None) -> list[dict[str, 
 
 
 def test_all_required_examples_exist() -> None:
-    assert {path.name for path in EXAMPLE_PATHS} >= EXPECTED_EXAMPLES
+    assert {path.name for path in EXAMPLE_PATHS} >= EXPECTED_EXAMPLES | GALLERY_EXAMPLES
+
+
+def test_gallery_table_lists_every_gallery_example() -> None:
+    from worker.gallery import GALLERY
+
+    assert {f"{entry.name}.json" for entry in GALLERY} == GALLERY_EXAMPLES
 
 
 @pytest.mark.parametrize("path", EXAMPLE_PATHS, ids=lambda path: path.name)
 def test_example_validates_and_round_trips_through_json(path: Path) -> None:
     document = json.loads(path.read_text())
     scene = validate_scene(document)
-    # Examples are meant to render quickly in tests: 64x64 film and 16 spp.
-    assert (scene.film.width, scene.film.height, scene.film.spp) == (64, 64, 16)
+    if path.name in GALLERY_EXAMPLES:
+        # A preview in which the phenomenon is visible: at least 256² (docs/gallery.md).
+        assert min(scene.film.width, scene.film.height) >= 256
+    else:
+        # The test fixtures render quickly in tests: 64x64 film and 16 spp.
+        assert (scene.film.width, scene.film.height, scene.film.spp) == (64, 64, 16)
     assert validate_scene(json.loads(json.dumps(scene.to_json_dict()))) == scene
     # The published JSON Schema accepts every example too (it is what HTTP clients validate against).
     jsonschema.validate(document, scene_json_schema())
@@ -84,6 +105,24 @@ def test_thin_film_examples_differ_only_in_the_emitter_shape() -> None:
     assert sphere_light.radius_m == 0.006
     assert math.dist(cylinder_light.p0_m, cylinder_light.p1_m) == pytest.approx(0.2, rel=1e-12)
     assert cylinder_light.radius_m == 0.001
+
+
+def test_fig7_gallery_pair_differs_only_in_the_emitter_shape() -> None:
+    """Fig. 7: the same object under a sphere and a cylinder source of identical spectrum and power."""
+    sphere_scene, cylinder_scene = (
+        validate_scene(json.loads((EXAMPLES_DIR / f"fig7_thin_film_{kind}_light.json").read_text()))
+        for kind in ("sphere", "cylinder")
+    )
+    assert sphere_scene.shapes == cylinder_scene.shapes
+    assert sphere_scene.materials == cylinder_scene.materials
+    assert sphere_scene.camera == cylinder_scene.camera
+    (sphere_light,), (cylinder_light,) = sphere_scene.emitters, cylinder_scene.emitters
+    assert sphere_light.spectrum == cylinder_light.spectrum
+    assert sphere_light.power_w == cylinder_light.power_w
+    centre = [(a + b) / 2 for a, b in zip(cylinder_light.p0_m, cylinder_light.p1_m, strict=True)]
+    assert centre == pytest.approx(sphere_light.center_m)
+    assert (sphere_light.radius_m, cylinder_light.radius_m) == (0.006, 0.001)
+    assert math.dist(cylinder_light.p0_m, cylinder_light.p1_m) == pytest.approx(0.2, rel=1e-12)
 
 
 def test_committed_json_schema_is_current() -> None:
