@@ -55,6 +55,12 @@ export class Api {
     return response.status === 204 ? null : response.json();
   }
 
+  /** An object URL of an authenticated image (an <img src> cannot send the bearer token). */
+  async blobUrl(path) {
+    const response = await this.request(path);
+    return URL.createObjectURL(await response.blob());
+  }
+
   /** POST a JSON body. */
   async postJson(path, body) {
     return this.json(path, { method: "POST", body: JSON.stringify(body), headers: { "Content-Type": "application/json" } });

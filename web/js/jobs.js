@@ -78,7 +78,47 @@ export class JobsPanel {
     select.replaceChildren(new Option("— upload a file instead —", ""));
     for (const example of examples) select.append(new Option(`${example.title} (${example.name})`, example.name));
     if (examples.length) select.value = examples[0].name;
+    this.examples = examples;
+    this.renderGallery(examples.filter((example) => example.figure));
     this.updateFormState();
+  }
+
+  /** One button per gallery scene (thumbnail + figure): a click submits it, named after the scene. */
+  renderGallery(gallery) {
+    const strip = this.form.querySelector("#gallery-examples");
+    strip.replaceChildren();
+    for (const example of gallery) {
+      const button = document.createElement("button");
+      button.type = "button";
+      button.className = "gallery-example";
+      button.dataset.example = example.name;
+      button.title = example.title;
+      button.setAttribute("aria-label", `render ${example.figure}: ${example.title}`);
+      if (example.thumbnail) {
+        const image = document.createElement("img");
+        image.alt = "";
+        image.width = image.height = 64;
+        this.api.blobUrl(example.thumbnail).then((url) => (image.src = url)).catch(() => {});
+        button.append(image);
+      }
+      const caption = document.createElement("span");
+      caption.textContent = example.figure;
+      button.append(caption);
+      button.addEventListener("click", () => {
+        this.form.querySelector("#scene-example").value = example.name;
+        this.form.querySelector("#scene-file").value = "";
+        this.form.querySelector("#job-name").value = example.name.replace(/\.json$/, "");
+        this.updateFormState();
+        this.submit().catch((error) => this.onError(error));
+      });
+      strip.append(button);
+    }
+  }
+
+  /** The most telling view of a job rendered from a gallery scene (by its one-click name), else null. */
+  galleryView(job) {
+    const example = (this.examples || []).find((e) => e.figure && e.name === `${job.name}.json`);
+    return example ? example.view : null;
   }
 
   updateFormState() {

@@ -55,6 +55,8 @@ async function route() {
   }
   if (active === "view" && a && a !== viewer.jobId) {
     const job = jobs.jobs.get(a);
+    // A gallery scene opens in its most telling view (e.g. the cylinder light's anisotropic ellipses).
+    if (job && jobs.galleryView(job) === "ellipses") viewer.controls.ellipses.checked = true;
     await viewer.open(a, { label: uploadedNames.get(a) ?? (job ? jobs.label(job) : undefined) });
   }
   if (active === "compare" && a && b) {

@@ -20,6 +20,7 @@ from hgcore.imaging import TONE_MAPS
 from hgcore.jobs.status import JobStatus
 from hgcore.store.base import ArtifactNotFoundError
 from schemas import EXAMPLES_DIR
+from schemas.gallery import GALLERY_BY_NAME, THUMBNAILS_DIR, GalleryView
 from service.api.deps import JobsDep, Reader, visible_job
 from service.api.routes.jobs import _ERRORS, JobId
 from service.image_metrics import map_statistics
@@ -123,6 +124,17 @@ class EllipseGrid(BaseModel):
 class ExampleScene(BaseModel):
     name: str = Field(examples=["cornell_box.json"])
     title: str = Field(examples=["Cornell box"])
+    figure: str | None = Field(
+        default=None, description="The paper figure a gallery scene reproduces.", examples=["Fig. 7 (right)"]
+    )
+    view: GalleryView | None = Field(
+        default=None, description="The most telling view of a finished render of a gallery scene."
+    )
+    thumbnail: str | None = Field(
+        default=None,
+        description="Path of a gallery scene's preview thumbnail (PNG).",
+        examples=["/v1/examples/fig7_thin_film_cylinder_light/thumbnail.png"],
+    )
 
 
 def install(app: FastAPI, max_images: int = 8, max_uploads: int = 4) -> None:
@@ -369,11 +381,42 @@ async def upload_image(request: Request, principal: Reader) -> UploadedImage:
 
 @router.get("/v1/examples", response_model=list[ExampleScene], summary="Example scenes", responses=_ERRORS)
 def list_examples(principal: Reader) -> list[ExampleScene]:
-    """The scenes in `schemas/examples/` (each renders as is)."""
-    return [
-        ExampleScene(name=path.name, title=json.loads(path.read_text()).get("name", path.stem))
-        for path in sorted(EXAMPLES_DIR.glob("*.json"))
-    ]
+    """The scenes in `schemas/examples/` (each renders as is): the gallery's first, in its order, with their
+    figure, view and thumbnail; then the others by name."""
+    examples = []
+    for path in sorted(EXAMPLES_DIR.glob("*.json")):
+        title = json.loads(path.read_text()).get("name", path.stem)
+        entry = GALLERY_BY_NAME.get(path.stem)
+        if entry is None:
+            examples.append(ExampleScene(name=path.name, title=title))
+            continue
+        has_thumbnail = (THUMBNAILS_DIR / f"{path.stem}.png").is_file()
+        examples.append(
+            ExampleScene(
+                name=path.name,
+                title=title,
+                figure=entry.figure,
+                view=entry.viewer_view,
+                thumbnail=f"/v1/examples/{path.stem}/thumbnail.png" if has_thumbnail else None,
+            )
+        )
+    order = list(GALLERY_BY_NAME)
+    return sorted(examples, key=lambda e: (order.index(e.name[:-5]) if e.figure else len(order), e.name))
+
+
+@router.get(
+    "/v1/examples/{stem}/thumbnail.png",
+    summary="A gallery scene's thumbnail",
+    responses={**_ERRORS, 200: {"content": {"image/png": {}}}},
+    response_class=Response,
+)
+def get_example_thumbnail(
+    stem: Annotated[str, Path(pattern=r"^[A-Za-z0-9_-]+$")], principal: Reader
+) -> Response:
+    path = THUMBNAILS_DIR / f"{stem}.png"
+    if stem not in GALLERY_BY_NAME or not path.is_file():
+        raise ArtifactNotFoundError(f"{stem}/thumbnail.png")
+    return Response(path.read_bytes(), media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
 @router.get("/v1/examples/{name}", summary="One example scene (JSON)", responses=_ERRORS)
