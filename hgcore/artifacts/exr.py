@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hgcore.artifacts.layout import is_spectral_channel, spectral_channel_wavelength_nm
+from hgcore.artifacts.layout import RGB_CHANNELS, is_spectral_channel, spectral_channel_wavelength_nm
 from hgcore.files import atomic_output
 
 
@@ -30,6 +30,21 @@ class ExrImage:
     height: int
     channels: dict[str, np.ndarray]
     attributes: dict[str, str] = field(default_factory=dict)
+
+    def stack(self, names: Sequence[str] | None = None) -> np.ndarray:
+        """The channels ``names`` (default: all, in file order) stacked along a last axis, (H, W, C)."""
+        chosen = list(self.channels) if names is None else list(names)
+        self.require(chosen, "image")
+        return np.stack([self.channels[name] for name in chosen], axis=-1)
+
+    @property
+    def rgb(self) -> np.ndarray:
+        """The linear-sRGB preview channels ``R``, ``G``, ``B`` stacked, (H, W, 3)."""
+        return self.stack(RGB_CHANNELS)
+
+    def band_names(self) -> list[str]:
+        """The spectral channel names, by wavelength."""
+        return [name for _, name in self.spectral_channels()]
 
     def spectral_channels(self) -> list[tuple[float, str]]:
         """(band centre in nm, channel name) of the spectral ``S0.<λ>nm`` channels, by wavelength."""

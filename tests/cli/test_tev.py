@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hgcore.artifacts.exr import read_exr
 from tests.cli.conftest import Served
 from tests.cli.tev_listener import TevListener
-from tests.web.conftest import read_exr
 
 HGRENDER = Path(sys.executable).parent / "hgrender"
 EXAMPLE = Path(__file__).parents[2] / "schemas" / "examples" / "cornell_box.json"

@@ -7,9 +7,9 @@ import re
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
+from hgcore.artifacts.exr import read_exr
 from tests.integrator.scenes import plane_under_source
 from worker.render.api import plan_chunks, render_scene
 
@@ -22,13 +22,10 @@ SPHERE = {
 }
 
 
-def read_exr(path: Path) -> tuple[list[str], np.ndarray, oiio.ImageSpec]:
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    spec = image.spec()
-    pixels = image.read_image("float")
-    image.close()
-    return list(spec.channelnames), np.asarray(pixels), spec
+def read_exr_stack(path: Path) -> tuple[list[str], np.ndarray, dict[str, str]]:
+    """Channel names in file order, all pixels (H, W, C) and the header attributes."""
+    image = read_exr(path)
+    return list(image.channels), image.stack(), image.attributes
 
 
 @pytest.fixture(scope="module")
@@ -49,9 +46,9 @@ def test_same_seed_is_bitwise_identical_and_other_seed_differs(scene: dict, tmp_
     render_scene(scene, tmp_path / "a", seed=3)
     render_scene(scene, tmp_path / "b", seed=3)
     render_scene(scene, tmp_path / "c", seed=4)
-    _, a, _ = read_exr(tmp_path / "a" / "image.exr")
-    _, b, _ = read_exr(tmp_path / "b" / "image.exr")
-    _, c, _ = read_exr(tmp_path / "c" / "image.exr")
+    _, a, _ = read_exr_stack(tmp_path / "a" / "image.exr")
+    _, b, _ = read_exr_stack(tmp_path / "b" / "image.exr")
+    _, c, _ = read_exr_stack(tmp_path / "c" / "image.exr")
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
 
@@ -60,9 +57,9 @@ def test_split_render_matches_unsplit_in_sample_count_and_expectation(scene: dic
     whole = render_scene(scene, tmp_path / "whole", spp=16, seed=1)
     split = render_scene(scene, tmp_path / "split", spp=16, seed=1, chunks=4)
     assert whole["spp"] == split["spp"] == 16
-    names, whole_pixels, _ = read_exr(tmp_path / "whole" / "image.exr")
-    _, split_pixels, _ = read_exr(tmp_path / "split" / "image.exr")
-    _, variance, _ = read_exr(tmp_path / "whole" / "variance.exr")
+    names, whole_pixels, _ = read_exr_stack(tmp_path / "whole" / "image.exr")
+    _, split_pixels, _ = read_exr_stack(tmp_path / "split" / "image.exr")
+    _, variance, _ = read_exr_stack(tmp_path / "whole" / "variance.exr")
     bands = [i for i, name in enumerate(names) if name.startswith("S0.")]
     # Image means of two independent estimates: their difference has variance 2·Σ var(pixel mean)/N².
     pixel_count = whole_pixels.shape[0] * whole_pixels.shape[1]
@@ -74,13 +71,13 @@ def test_split_render_matches_unsplit_in_sample_count_and_expectation(scene: dic
 
 def test_exr_channels_and_attributes_follow_the_contract(scene: dict, tmp_path: Path) -> None:
     summary = render_scene(scene, tmp_path, spp=4)
-    names, pixels, spec = read_exr(tmp_path / "image.exr")
+    names, pixels, attributes = read_exr_stack(tmp_path / "image.exr")
     spectral = [name for name in names if name.startswith("S0.")]
     assert len(spectral) == 8
     assert all(re.fullmatch(r"S0\.\d+,\d{6}nm", name) for name in spectral)
     assert spectral[0] == "S0.405,000000nm"  # 8 bands over 380–780 nm: centres 405, 455, …
-    assert spec.getattribute("spectralLayoutVersion") == "1.0"
-    assert spec.getattribute("emissiveUnits") == "W.m^-2.sr^-1"
+    assert attributes["spectralLayoutVersion"] == "1.0"
+    assert attributes["emissiveUnits"] == "W.m^-2.sr^-1"
     for name in (
         "R",
         "G",

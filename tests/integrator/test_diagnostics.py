@@ -12,8 +12,8 @@ import math
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 
+from hgcore.artifacts.exr import read_exr
 from hgcore.optics.calculator import coherence_at
 from tests.integrator.scenes import plane_under_source
 from worker.render.api import render_scene
@@ -24,11 +24,7 @@ FOV_DEG = 20.0
 
 
 def channels(path: Path) -> dict[str, np.ndarray]:
-    image = oiio.ImageInput.open(str(path))
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"))
-    image.close()
-    return {name: pixels[..., index] for index, name in enumerate(names)}
+    return read_exr(path).channels
 
 
 def plane_points() -> np.ndarray:

@@ -12,9 +12,9 @@ import copy
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
+from hgcore.artifacts.exr import read_exr
 from worker.render.api import render_scene
 
 BOX = {
@@ -68,15 +68,10 @@ def render_bands(material: dict, tmp_path: Path, name: str, seed: int) -> tuple[
     scene = copy.deepcopy(BOX)
     scene["materials"]["object"] = material
     render_scene(scene, tmp_path / name, seed=seed)
-    image = oiio.ImageInput.open(str(tmp_path / name / "image.exr"))
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"))
-    image.close()
-    variance_file = oiio.ImageInput.open(str(tmp_path / name / "variance.exr"))
-    variance = np.asarray(variance_file.read_image("float"))
-    variance_file.close()
-    bands = [i for i, n in enumerate(names) if n.startswith("S0.")]
-    return pixels[..., bands], variance[..., : len(bands)]
+    image = read_exr(tmp_path / name / "image.exr")
+    variance = read_exr(tmp_path / name / "variance.exr")
+    bands = image.band_names()
+    return image.stack(bands), variance.stack(bands)
 
 
 @pytest.mark.parametrize(

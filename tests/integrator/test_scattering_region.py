@@ -13,8 +13,8 @@ import copy
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 
+from hgcore.artifacts.exr import read_exr
 from worker.render.api import render_scene
 
 SCENE = {
@@ -71,11 +71,8 @@ def diagnostics(radius_m: float, tmp_path: Path) -> dict[str, np.ndarray]:
     scene = copy.deepcopy(SCENE)
     scene["materials"]["wall"]["scattering_region_radius_m"] = radius_m
     render_scene(scene, tmp_path / f"a{radius_m}", seed=7)
-    image = oiio.ImageInput.open(str(tmp_path / f"a{radius_m}" / "image.exr"))
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"))
-    image.close()
-    return {name: pixels[..., i] for i, name in enumerate(names) if name.startswith("coherence.")}
+    channels = read_exr(tmp_path / f"a{radius_m}" / "image.exr").channels
+    return {name: values for name, values in channels.items() if name.startswith("coherence.")}
 
 
 def test_coherence_lengths_scale_inversely_with_the_region_radius(tmp_path: Path) -> None:

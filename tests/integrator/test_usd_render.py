@@ -12,10 +12,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
+from hgcore.artifacts.exr import read_exr
 from hgcore.optics.calculator import coherence_at
 from schemas.usd_import import import_usd_isolated
 from worker.render.api import render_scene
@@ -65,13 +65,10 @@ def test_usd_stage_renders_with_the_cylinder_anisotropy(tmp_path: Path) -> None:
     scene = import_usd_isolated(author_stage(tmp_path), timeout_s=60)
     assert scene.emitters[0].type == "cylinder"
     render_scene(scene, tmp_path / "out", spp=4)
-    image = oiio.ImageInput.open(str(tmp_path / "out" / "image.exr"))
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"))
-    image.close()
-    weight = pixels[..., names.index("coherence.weight")]
-    anisotropy = pixels[..., names.index("coherence.anisotropy")]
-    depth = pixels[..., names.index("depth")]
+    channels = read_exr(tmp_path / "out" / "image.exr").channels
+    weight = channels["coherence.weight"]
+    anisotropy = channels["coherence.anisotropy"]
+    depth = channels["depth"]
     centre = anisotropy[10:14, 10:14][(weight[10:14, 10:14] > 0) & (np.abs(depth[10:14, 10:14] - 3.0) < 0.05)]
     assert centre.size >= 8
     expected = coherence_at("cylinder", radius_m=RADIUS_M, length_m=LENGTH_M, distance_m=1.0)["anisotropy"]

@@ -1,21 +1,17 @@
-"""Reading the renderer's OpenEXR outputs back with OpenImageIO, channel by channel."""
+"""The renderer's OpenEXR outputs as float64 arrays, read with the project's one EXR reader."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
+
+from hgcore.artifacts.exr import read_exr
 
 
 def read_channels(path: Path) -> dict[str, np.ndarray]:
     """Every channel of the EXR at ``path`` as a float64 (H, W) array, keyed by channel name."""
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"), dtype=np.float64)
-    image.close()
-    return {name: pixels[..., index] for index, name in enumerate(names)}
+    return {name: values.astype(np.float64) for name, values in read_exr(path).channels.items()}
 
 
 def spectral_stack(channels: dict[str, np.ndarray]) -> tuple[list[str], np.ndarray]:

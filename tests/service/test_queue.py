@@ -15,24 +15,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
+from hgcore.artifacts.exr import read_exr
 from hgcore.store import store_from_settings
 from hgrender.client import HgrenderClient
 from service.jobs import JobService
 from tests.service.conftest import EXAMPLES_DIR, LiveService, tiny_scene, wait_for
 
 pytestmark = pytest.mark.slow
-
-
-def read_exr(path: Path) -> tuple[list[str], np.ndarray, oiio.ImageSpec]:
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    spec = image.spec()
-    pixels = image.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
-    image.close()
-    return list(spec.channelnames), np.asarray(pixels), spec
 
 
 def job_service(service: LiveService) -> JobService:
@@ -82,11 +73,12 @@ def test_example_scenes_end_to_end(two_workers: LiveService, tmp_path: Path) -> 
         assert {"image.exr", "preview.png", "summary.json", "worker.log", "manifest.json"} <= names_listed
         out_dir = tmp_path / name
         client.download_all(job_id, out_dir)
-        channels, pixels, spec = read_exr(out_dir / "image.exr")
+        image = read_exr(out_dir / "image.exr")
+        channels, pixels = list(image.channels), image.stack()
         spectral = [c for c in channels if c.startswith("S0.") and c.endswith("nm")]
         assert spectral and all("," in c for c in spectral)
         assert {"R", "G", "B", "coherence.l1_um", "coherence.anisotropy"} <= set(channels)
-        assert spec.getattribute("spectralLayoutVersion") == "1.0"
+        assert image.attributes["spectralLayoutVersion"] == "1.0"
         assert pixels.shape == (16, 16, len(channels)) and np.isfinite(pixels).all()
         rgb = pixels[..., [channels.index(c) for c in "RGB"]]
         assert rgb.max() > 0, f"{name}: black image"
@@ -106,10 +98,12 @@ def test_four_chunk_job_equals_local_split_render(two_workers: LiveService, tmp_
     assert {c["spp"] for c in final["chunks"]} == {2}
     client.download(job_id, "image.exr", tmp_path / "service.exr")
     render_scene(scene, tmp_path / "local", chunks=4)
-    service_channels, service_pixels, _ = read_exr(tmp_path / "service.exr")
-    local_channels, local_pixels, _ = read_exr(tmp_path / "local" / "image.exr")
-    assert service_channels == local_channels
-    np.testing.assert_allclose(service_pixels, local_pixels, rtol=1e-5, atol=1e-7)
+    service_image, local_image = (
+        read_exr(tmp_path / "service.exr"),
+        read_exr(tmp_path / "local" / "image.exr"),
+    )
+    assert list(service_image.channels) == list(local_image.channels)
+    np.testing.assert_allclose(service_image.stack(), local_image.stack(), rtol=1e-5, atol=1e-7)
 
 
 def test_manifest_lists_artifacts_and_outlives_redis(two_workers: LiveService, tmp_path: Path) -> None:

@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import httpx
-import numpy as np
 import pytest
 
+from hgcore.artifacts.exr import ExrImage, read_exr
 from hgrender.client import HgrenderClient
 from service.redis_server import free_loopback_port
 
@@ -78,32 +78,6 @@ def cylinder_scene(axis_end_m: tuple[float, float] = (0.3, 0.0), **film: Any) ->
     scene["emitters"][0]["p0_m"] = [-end_x_m, 0.5, -end_z_m]
     scene["emitters"][0]["p1_m"] = [end_x_m, 0.5, end_z_m]
     return scene
-
-
-@dataclass
-class ExrImage:
-    """Channels of an EXR read with OpenImageIO: name → float32 (H, W)."""
-
-    channels: dict[str, np.ndarray]
-
-    @property
-    def rgb(self) -> np.ndarray:
-        return np.stack([self.channels[c] for c in "RGB"], axis=-1)
-
-    def band_names(self) -> list[str]:
-        names = [n for n in self.channels if n.startswith("S0.")]
-        return sorted(names, key=lambda n: float(n[3:-2].replace(",", ".")))
-
-
-def read_exr(path: Path) -> ExrImage:
-    import OpenImageIO as oiio
-
-    image_input = oiio.ImageInput.open(str(path))
-    assert image_input is not None, oiio.geterror()
-    spec = image_input.spec()
-    pixels = image_input.read_image(format="float")
-    image_input.close()
-    return ExrImage({name: pixels[..., i] for i, name in enumerate(spec.channelnames)})
 
 
 @dataclass

@@ -306,7 +306,7 @@ def test_diagonal_cylinder_gives_45_degree_ellipses(
 def test_diagnostics_exr_holds_the_coherence_channels(
     served: Served, cylinder_job: RenderedJob, tmp_path: Any
 ) -> None:
-    from tests.web.conftest import read_exr
+    from hgcore.artifacts.exr import read_exr
 
     response = served.get(f"/v1/jobs/{cylinder_job.job_id}/diagnostics.exr")
     assert response.status_code == 200 and response.headers["content-type"] == "image/x-exr"

@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from hgcore.artifacts.exr import read_exr
 from hgcore.imaging import tone_map
-from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, read_exr, screenshot
+from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, screenshot
 from tests.web.test_browser import canvas_rgb, drawn_count, redrawn, viridis8
 
 pytestmark = pytest.mark.browser
