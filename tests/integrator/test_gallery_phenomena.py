@@ -20,7 +20,6 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
-from hgcore.artifacts.layout import LUMINANCE_VARIANCE, VARIANCE_EXR
 from tests.render.scenes import example
 from worker.render.api import render_scene
 
@@ -30,10 +29,8 @@ REC709 = np.array([0.2126, 0.7152, 0.0722])
 @dataclass
 class Render:
     bands: np.ndarray  # (H, W, B) spectral radiance
-    band_variance: np.ndarray  # (H, W, B) variance of each pixel mean
     wavelengths_nm: np.ndarray
     luminance: np.ndarray  # (H, W)
-    luminance_variance: np.ndarray  # (H, W)
     normal: np.ndarray  # (H, W, 3) world normal of the first hit
     depth_m: np.ndarray  # (H, W) distance to the first hit
 
@@ -44,17 +41,13 @@ def render(name: str, tmp_path: Path, size_px: int, spp: int, scene: dict | None
     if scene is None:
         scene = example(name, width=size_px, height=size_px, spp=spp)
     render_scene(scene, out, spp=spp)
-    image, variance = read_exr(out / "image.exr"), read_exr(out / VARIANCE_EXR)
-    spectral = image.spectral_channels()
-    wavelengths = np.array([w for w, _ in spectral])
-    rgb = np.stack([image.channels[c] for c in "RGB"], axis=-1)
+    image = read_exr(out / "image.exr")
+    bands = image.band_names()
     return Render(
-        bands=np.stack([image.channels[n] for _, n in spectral], axis=-1).astype(np.float64),
-        band_variance=np.stack([variance.channels[n] for _, n in spectral], axis=-1).astype(np.float64),
-        wavelengths_nm=wavelengths,
-        luminance=(rgb @ REC709).astype(np.float64),
-        luminance_variance=variance.channels[LUMINANCE_VARIANCE].astype(np.float64),
-        normal=np.stack([image.channels[f"normal.{a}"] for a in "XYZ"], axis=-1),
+        bands=image.stack(bands).astype(np.float64),
+        wavelengths_nm=np.array([w for w, _ in image.spectral_channels()]),
+        luminance=(image.rgb @ REC709).astype(np.float64),
+        normal=image.stack([f"normal.{a}" for a in "XYZ"]),
         depth_m=image.channels["depth"].astype(np.float64),
     )
 
@@ -112,7 +105,7 @@ def brightest_material_pixels(image: Render, albedo: np.ndarray, threshold: floa
 def coherence(out: Path) -> dict[str, np.ndarray]:
     image = read_exr(out / "image.exr")
     channels = {k: image.channels[f"coherence.{k}"] for k in ("l1_um", "l2_um", "r_m", "anisotropy")}
-    channels["albedo"] = np.stack([image.channels[f"albedo.{c}"] for c in "RGB"], axis=-1)
+    channels["albedo"] = image.stack([f"albedo.{c}" for c in "RGB"])
     return channels
 
 
