@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,8 @@ DOCS_IMAGES_DIR = ROOT / "docs" / "gallery"
 DOC_PATH = ROOT / "docs" / "gallery.md"
 PUBLICATION_SIZE_PX = 512
 PUBLICATION_SPP = 256
+#: Chunks a gallery render is split into: progress is reported after each.
+PROGRESS_CHUNKS = 8
 
 
 def gallery_scene(entry: GalleryEntry, size_px: int | None, spp: int | None) -> dict[str, Any]:
@@ -47,7 +50,14 @@ def render_entry(entry: GalleryEntry, size_px: int | None, spp: int | None, out_
     scene = gallery_scene(entry, size_px, spp)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    summary = render_scene(scene, out_dir, spp=scene["film"]["spp"])
+
+    def progress(fraction: float) -> None:  # long renders show progress (one stderr line, redrawn)
+        print(f"\r{entry.name}: {fraction:6.1%}", end="", file=sys.stderr, flush=True)
+
+    summary = render_scene(
+        scene, out_dir, spp=scene["film"]["spp"], chunks=PROGRESS_CHUNKS, progress=progress
+    )
+    print(file=sys.stderr)
     wall_s = time.perf_counter() - start
     summary = {
         **summary,
