@@ -64,11 +64,11 @@ GALLERY: tuple[GalleryEntry, ...] = (
         "fig7_thin_film_cylinder_light",
         "Fig. 7 (right)",
         "10 000 spp, ~4 hours",
-        "The same shell under a 20 cm × 0.1 cm tube of the same spectrum and power. The paper: the tube's "
-        "coherence is long across its axis and short along it (here ℓ₂ = 0.88 µm = r√12/(kL), as Eq. 14 "
-        "gives), so the fringes survive only where the normal is perpendicular to the axis. Today's "
-        "renderer washes them out on the whole rim (spectral contrast ≈ 0 even where n ⟂ axis): an open "
-        "question for the rough-film interference. Open it in the viewer: ellipses show the anisotropy.",
+        "The same shell under a 20 cm × 0.1 cm tube of the same spectrum and power: the tube's coherence "
+        "is long across its axis and short along it (here ℓ₂ = 0.88 µm = r√12/(kL), as Eq. 14 gives), so "
+        "fringes survive only where the normal is perpendicular to the axis — which is where this framing's "
+        "lit rim is (|n_x| < 0.15), so the band keeps its colours but is noisier (the tube is harder to "
+        "sample than the sphere). Open it in the viewer: the ellipses show the anisotropy.",
         "ellipses",
     ),
     GalleryEntry(

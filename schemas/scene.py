@@ -293,6 +293,9 @@ class Film(StrictModel):
     #: Number of HG modes per interaction (1 = the paper's 0th-order approximation; Fig. 9 uses 16).
     modes: Annotated[int, Field(ge=1, le=MAX_FILM_MODES)] = 1
     max_depth: Annotated[int, Field(ge=1, le=64)] = 8
+    #: ``hg_path``: partially coherent light transport (the paper's PLT); ``rlt``: the radiometric baseline
+    #: (a fully coherent plane wave per sample, no shape matrix; worker/render/rlt.py).
+    integrator: Literal["hg_path", "rlt"] = "hg_path"
 
     @model_validator(mode="after")
     def _range(self) -> Film:

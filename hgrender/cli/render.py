@@ -26,6 +26,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="random seed (overrides film.seed)")
     parser.add_argument("--modes", type=int, help="HG transverse modes 1..16 (overrides film.modes)")
     parser.add_argument(
+        "--integrator",
+        choices=("hg_path", "rlt"),
+        help="hg_path: partially coherent transport (PLT); rlt: the radiometric baseline, a coherent "
+        "plane wave per sample (overrides film.integrator)",
+    )
+    parser.add_argument(
         "--chunks",
         type=positive_int,
         default=None,
@@ -86,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
             spp=args.spp,
             seed=args.seed,
             modes=args.modes,
+            integrator=args.integrator,
             chunks=chunks,
             progress=display.update,
             bundle_dir=bundle_dir,

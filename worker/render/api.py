@@ -204,6 +204,7 @@ def render_scene(
     spp: int | None = None,
     seed: int | None = None,
     modes: int | None = None,
+    integrator: str | None = None,
     chunks: int = 1,
     progress: ProgressCallback | None = None,
     bundle_dir: Path | None = None,
@@ -213,7 +214,9 @@ def render_scene(
     ``on_chunk(sums)`` gets the running sum of the chunks finished so far after each one (previews)."""
     parsed = as_scene(scene)
     overrides = {
-        key: value for key, value in (("spp", spp), ("seed", seed), ("modes", modes)) if value is not None
+        key: value
+        for key, value in (("spp", spp), ("seed", seed), ("modes", modes), ("integrator", integrator))
+        if value is not None
     }
     if overrides:
         parsed = validate_scene({**parsed.to_json_dict(), "film": {**parsed.film.model_dump(), **overrides}})

@@ -112,6 +112,11 @@ def _reflect_vector(vector: Any, normal: Any) -> Any:
 class HGPathIntegrator(mi.SamplingIntegrator):
     """Mitsuba plugin ``hg_path`` (properties: ``max_depth`` = 8, ``rr_depth`` = 5)."""
 
+    #: False: sources carry their shape matrix and coherence-sensitive terms take the phase towards the
+    #: emitter's centre (PLT). True: every source is a point at the sampled position — a fully coherent
+    #: plane wave per sample, Σ⊥ = 0 — the radiometric baseline of ``worker.render.rlt``.
+    plane_waves: bool = False
+
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
         self.max_depth = int(props.get("max_depth", 8))
@@ -371,6 +376,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
                 src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
                 src_yy = dr.select(hit_emitter, em_syy, sr_yy)
+                if self.plane_waves:
+                    src_xx, src_xy, src_yy = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
                 # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
                 # becomes the distance from the segment's origin to that centre.
                 centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray.o)
@@ -389,7 +396,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 if has_film:
                     # An emitter reached straight from the film: its interference phase is taken towards the
                     # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
-                    centre_phase = hit_emitter & ~chain_specular & ~film_transmitted
+                    centre_phase = hit_emitter & ~chain_specular & ~film_transmitted & (not self.plane_waves)
                     _, emitter_to_film = emitter_direction(
                         mi, self.context.emitter_flat, em_record, film_position
                     )
@@ -455,7 +462,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             nee_syy = mi.Float(0.0)
             nee_c2 = mi.Float(0.0)
             nee_s2 = mi.Float(0.0)
-            needs_nee_coherence = do_nee & (~seen_nonspecular | coherence_materials)
+            needs_nee_coherence = do_nee & (~seen_nonspecular | coherence_materials) & (not self.plane_waves)
             if needs_nee_coherence:
                 nee_fx, nee_fy = self._frame_for(nee_dir)
                 nee_sxx, nee_sxy, nee_syy = emitter_coherence(
@@ -479,7 +486,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             wo_em = frame.to_local(ds_em.d)
             # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
             # and a thin film's interference phase; the sampled point serves the radiometric terms only.
-            wo_centre = frame.to_local(-nee_dir)
+            wo_centre = wo_em if self.plane_waves else frame.to_local(-nee_dir)
             wo_eval = wo_em
             if has_grating:
                 wo_eval = dr.select(kind == int(mat.MaterialKind.GRATING), wo_centre, wo_em)

@@ -21,7 +21,8 @@ from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums
 from hgcore.optics.sources import source_coefficients
 from worker.mitsuba_setup import load_mitsuba
 from worker.render.emitters import EmitterKind
-from worker.render.integrator import HGPathIntegrator, RenderContext, register
+from worker.render.integrator import RenderContext, register
+from worker.render.rlt import integrator_class
 from worker.render.scene_compiler import CompiledScene
 
 MAX_WAVEFRONT = 1 << 20  # samples per pass: ~40 float32 outputs each stay in memory until reduced
@@ -43,7 +44,8 @@ class Renderer:
         self.scene = mi.load_dict(compiled.mitsuba_dict, optimize=False)
         self.sensor = self.scene.sensors()[0]
         self.width, self.height = compiled.scene.film.width, compiled.scene.film.height
-        self.integrator = HGPathIntegrator(mi.Properties())
+        # film.integrator: hg_path (partially coherent, PLT) or rlt (the radiometric baseline).
+        self.integrator = integrator_class(compiled.scene.film.integrator)(mi.Properties())
         self.integrator.max_depth = compiled.scene.film.max_depth
         self.integrator.attach(self._context())
 
