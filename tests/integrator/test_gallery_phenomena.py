@@ -116,7 +116,7 @@ def test_cylinder_source_coherence_is_short_along_its_axis_only(tmp_path: Path) 
     diagnostics = {}
     for kind in ("sphere", "cylinder"):
         name = f"fig7_thin_film_{kind}_light"
-        image = render(name, tmp_path, 64, 16)
+        image = render(name, tmp_path, 96, 16)
         values = coherence(tmp_path / name)
         pixels = brightest_material_pixels(image, values["albedo"], 0.05)
         assert pixels.sum() >= 20
