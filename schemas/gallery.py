@@ -35,8 +35,8 @@ GALLERY: tuple[GalleryEntry, ...] = (
         "Fig. 1(f), right disc",
         "Fig. 1: 90 000 spp, ~3 days (whole figure)",
         "The first order's rainbow streak on the near half (red by the hole, violet at the rim) and a "
-        "fainter second rainbow (the 3rd order; the 2nd is weak at duty 0.35) on the far half. The tracks "
-        "are concentric (the optical disc's radial tangent), so each order is a radial streak.",
+        "fainter second-order rainbow (violet to green, the grating equation at 2λ/d) on the far half. "
+        "The tracks are concentric (the optical disc's radial tangent), so each order is a radial streak.",
         "image",
     ),
     GalleryEntry(

@@ -99,6 +99,9 @@ def write_doc(summaries: dict[str, dict[str, Any]]) -> None:
         "(luminance p99) and can be moved from there.",
         "",
     ]
+    if summaries:
+        total_s = sum(summary["wall_s"] for summary in summaries.values())
+        lines += [f"Total render time of the {len(summaries)} scenes below: {total_s / 60:.1f} min.", ""]
     for entry in GALLERY:
         summary = summaries.get(entry.name)
         lines += [f"## {entry.figure}: `{entry.name}`", ""]
