@@ -67,6 +67,8 @@ _BY_STATE_KEY = "hgrender:jobs:by_state"
 _IDEMPOTENCY_KEY = "hgrender:idempotency:{}:{}"
 EVENTS_CHANNEL = "hgrender:events:{}"
 _IDEMPOTENCY_WAIT_S = 2.0
+_RECONCILE_LOCK_KEY = "hgrender:reconcile-lock"
+_RQ_ENDED = frozenset({RQJobStatus.FINISHED, RQJobStatus.FAILED, RQJobStatus.STOPPED, RQJobStatus.CANCELED})
 
 # KEYS: job hash, by-state hash. ARGV: new status, n allowed, allowed..., then field/value pairs to set.
 # Returns the previous status, or false when the job is missing or the transition is not allowed.
@@ -273,12 +275,26 @@ class JobService:
             self._enqueue(pipe, job_id, chunk_count, PRIORITY_QUEUES[priority])
             pipe.execute()
 
-    def _enqueue(self, pipe: redis.client.Pipeline, job_id: str, chunk_count: int, queue_name: str) -> None:
+    def _enqueue(
+        self,
+        pipe: redis.client.Pipeline,
+        job_id: str,
+        chunk_count: int,
+        queue_name: str,
+        only: str | None = None,
+    ) -> None:
         """Add the chunk jobs (queued) and the merge job (deferred on all chunks, failures allowed), or
-        for a one-chunk job the single job that renders and merges."""
+        for a one-chunk job the single job that renders and merges. ``only``: recreate just that RQ job
+        (reconciliation), at the front of the queue."""
         queue = self._queues[queue_name]
+        # Finished work first: a retry goes to the front of its queue, and so does a merge once its last
+        # chunk ended, so a backlog of new chunks delays neither (jobs finish in submission order).
         retry = (
-            Retry(max=self.settings.chunk_retry_max, interval=self.settings.chunk_retry_intervals_s)
+            Retry(
+                max=self.settings.chunk_retry_max,
+                interval=self.settings.chunk_retry_intervals_s,
+                enqueue_at_front=True,
+            )
             if self.settings.chunk_retry_max > 0
             else None
         )
@@ -289,31 +305,34 @@ class JobService:
             "retry": retry,
         }
         if chunk_count == 1:
-            render = queue.create_job(
-                RENDER_JOB_TASK,
-                args=(job_id,),
-                job_id=merge_rq_id(job_id),
-                description=f"render and merge job {job_id}",
-                **common,
-            )
-            queue.enqueue_job(render, pipeline=pipe)
+            steps = [(RENDER_JOB_TASK, (job_id,), merge_rq_id(job_id), f"render and merge job {job_id}")]
+        else:
+            steps = [
+                (
+                    CHUNK_TASK,
+                    (job_id, index),
+                    chunk_rq_id(job_id, index),
+                    f"render chunk {index} of job {job_id}",
+                )
+                for index in range(chunk_count)
+            ]
+        for task, args, rq_id, description in steps:
+            if only not in (None, rq_id):
+                continue
+            step = queue.create_job(task, args=args, job_id=rq_id, description=description, **common)
+            # Enqueued at the back now; any later enqueue (a retry, a dead worker's chunk found by the
+            # maintenance pass) goes to the front (RQ's ``Job.should_enqueue_at_front``).
+            step.enqueue_at_front = True
+            queue.enqueue_job(step, pipeline=pipe, at_front=only is not None)
+        if chunk_count == 1 or only not in (None, merge_rq_id(job_id)):
             return
-        chunk_ids = [chunk_rq_id(job_id, index) for index in range(chunk_count)]
-        for index, rq_id in enumerate(chunk_ids):
-            chunk = queue.create_job(
-                CHUNK_TASK,
-                args=(job_id, index),
-                job_id=rq_id,
-                description=f"render chunk {index} of job {job_id}",
-                **common,
-            )
-            queue.enqueue_job(chunk, pipeline=pipe)
+        chunk_ids = [rq_id for _, _, rq_id, _ in steps]
         merge = queue.create_job(
             MERGE_TASK,
             args=(job_id,),
             job_id=merge_rq_id(job_id),
             description=f"merge job {job_id}",
-            depends_on=Dependency(jobs=chunk_ids, allow_failure=True),
+            depends_on=Dependency(jobs=chunk_ids, allow_failure=True, enqueue_at_front=True),
             status=RQJobStatus.DEFERRED,
             **common,
         )
@@ -433,9 +452,23 @@ class JobService:
             raise JobConflictError(f"status: job is already {current.status.value}")
         for rq_id in rq_ids(job_id, view.chunks_total):
             self._stop_rq_job(rq_id)
+        self._mark_unfinished_chunks_canceled(job_id, view.chunks_total)
         current = self.get(job_id)
         assert current is not None
         return current
+
+    def _mark_unfinished_chunks_canceled(self, job_id: str, chunk_count: int) -> None:
+        """Chunks (and the merge step) that had not finished read ``canceled``, not ``running`` or
+        ``queued`` forever: their RQ jobs were dropped or stopped above."""
+        fields = self.chunk_fields(job_id)
+        steps = [*(str(i) for i in range(chunk_count)), "merge"]
+        unfinished = {
+            f"{step}.status": "canceled"
+            for step in steps
+            if fields.get(f"{step}.status", "queued" if step != "merge" else "") in {"queued", "running"}
+        }
+        if unfinished:
+            self.client.hset(_CHUNKS_KEY.format(job_id), mapping=unfinished)
 
     def _stop_rq_job(self, rq_id: str) -> None:
         try:
@@ -449,6 +482,92 @@ class JobService:
         elif status in {RQJobStatus.QUEUED, RQJobStatus.DEFERRED, RQJobStatus.SCHEDULED}:
             with contextlib.suppress(InvalidJobOperation):
                 rq_job.cancel()
+
+    # ---- reconciliation --------------------------------------------------------------------------------
+
+    def stranded_rq_jobs(self) -> dict[str, str]:
+        """RQ jobs of unfinished hgrender jobs that nothing will ever run: ``{rq id: reason}``.
+
+        A chunk or merge is live when RQ has it where its status says (queued: in its queue or the
+        worker's intermediate list; started: in the StartedJobRegistry; scheduled: in the
+        ScheduledJobRegistry; deferred: some chunk still unfinished). Everything else (missing from Redis,
+        queued in no queue, a deferred merge whose chunks all ended) is stranded: what a crash between
+        two non-atomic steps, or a Redis restart from a slightly older AOF, can leave behind."""
+        live: set[str] = set()
+        for queue in self._queues.values():
+            live |= set(queue.get_job_ids()) | set(queue.intermediate_queue.get_job_ids())
+            live |= set(queue.started_job_registry.get_job_ids())
+            live |= set(queue.scheduled_job_registry.get_job_ids())
+        stranded: dict[str, str] = {}
+        for job_id in self._unfinished_job_ids():
+            chunk_count = int(self.client.hget(_JOB_KEY.format(job_id), "chunks") or 0)
+            ids = rq_ids(job_id, chunk_count)
+            fetched = RQJob.fetch_many(ids, connection=self.client)
+            statuses = {
+                rq_id: job.get_status(refresh=False) if job else None
+                for rq_id, job in zip(ids, fetched, strict=True)
+            }
+            for rq_id, status in statuses.items():
+                if status is None:
+                    stranded[rq_id] = "missing"
+                elif status == RQJobStatus.DEFERRED:
+                    if all(statuses[c] in _RQ_ENDED for c in ids[:-1]):
+                        stranded[rq_id] = "deferred after its chunks ended"
+                elif status not in _RQ_ENDED and rq_id not in live:
+                    stranded[rq_id] = f"{status.value} but in no queue or registry"
+        return stranded
+
+    def _unfinished_job_ids(self) -> list[str]:
+        ids = [i.decode() for i in self.client.zrange(_INDEX_KEY, 0, -1)]
+        with self.client.pipeline(transaction=False) as pipe:
+            for job_id in ids:
+                pipe.hget(_JOB_KEY.format(job_id), "status")
+            statuses = pipe.execute()
+        unfinished = {JobStatus.QUEUED.value.encode(), JobStatus.RUNNING.value.encode()}
+        return [i for i, status in zip(ids, statuses, strict=True) if status in unfinished]
+
+    def reconcile(self, confirm_after_s: float = 2.0) -> dict[str, str]:
+        """Re-enqueue the stranded RQ jobs of unfinished jobs (``stranded_rq_jobs``), at the front of their
+        queue; recreate those missing from Redis. Run on start and after a Redis restart, while workers may
+        be running: only what is found stranded twice, ``confirm_after_s`` apart and in the same state, is
+        touched (a chunk moving between a queue and a registry looks stranded for an instant). One
+        reconciliation at a time (a lock). Returns what was re-enqueued, with why."""
+        if not self.client.set(_RECONCILE_LOCK_KEY, "1", nx=True, ex=60):
+            return {}
+        try:
+            first = self.stranded_rq_jobs()
+            if first and confirm_after_s > 0:
+                time.sleep(confirm_after_s)
+            confirmed = {k: v for k, v in self.stranded_rq_jobs().items() if first.get(k) == v}
+            for rq_id in confirmed:
+                self._revive(rq_id)
+            return confirmed
+        finally:
+            self.client.delete(_RECONCILE_LOCK_KEY)
+
+    def _revive(self, rq_id: str) -> None:
+        """Put one stranded RQ job (``<id>-chunk-<i>`` or ``<id>-merge``) at the front of its queue."""
+        job_id = rq_id.split("-", 1)[0]
+        record = self.record(job_id)
+        queue = self._queues[PRIORITY_QUEUES[record["priority"]]]
+        try:
+            rq_job = RQJob.fetch(rq_id, connection=self.client)
+        except NoSuchJobError:
+            self._recreate(job_id, int(record["chunks"]), rq_id, queue.name)
+            return
+        queue.enqueue_job(rq_job, at_front=True)
+
+    def _recreate(self, job_id: str, chunk_count: int, rq_id: str, queue_name: str) -> None:
+        """Recreate a lost RQ job the way ``create`` made it, then put it at the front of its queue."""
+        with self.client.pipeline() as pipe:
+            pipe.multi()
+            self._enqueue(pipe, job_id, chunk_count, queue_name, only=rq_id)
+            pipe.execute()
+        if rq_id == merge_rq_id(job_id) and chunk_count > 1:
+            chunks = RQJob.fetch_many(rq_ids(job_id, chunk_count)[:-1], connection=self.client)
+            if all(c is not None and c.get_status(refresh=False) in _RQ_ENDED for c in chunks):
+                merge = RQJob.fetch(rq_id, connection=self.client)
+                self._queues[queue_name].enqueue_job(merge, at_front=True)  # nobody else will
 
     def delete(self, job_id: str) -> None:
         """Remove the job everywhere: stop it if needed, then its RQ jobs, record, indexes, artifacts."""

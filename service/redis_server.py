@@ -1,8 +1,13 @@
 """A private ``redis-server`` subprocess for the embedded deployment (``hgrender serve`` without REDIS_URL).
 
-Persistence is on (append-only file, fsync every second, plus RDB snapshots) under ``<data_dir>/redis`` so
-job records and queued chunks survive a restart. The server listens on loopback only, on a free port
-chosen at start, and the start returns once the server answers PING.
+Persistence is on (append-only file plus RDB snapshots) under ``<data_dir>/redis`` so job records and
+queued chunks survive a restart. The AOF is fsynced before every reply (``appendfsync always``): what a
+worker or the API saw acknowledged survives a SIGKILL of the server, so a restart never resumes from a
+state up to a second older than what the workers already acted on (a chunk marked done whose completion
+the server forgot, a dequeued chunk that is back in no queue). It costs one fsync per write batch, which
+the service's write rate (a few per chunk and per progress event) affords. The server listens on
+loopback only, on a port chosen free at the first start and kept across restarts (clients reconnect to
+the same URL), and ``start`` returns once the server answers PING.
 """
 
 from __future__ import annotations
@@ -51,7 +56,7 @@ class RedisServer:
             "--port", str(self.port),
             "--dir", str(self.data_dir.resolve()),
             "--appendonly", "yes",
-            "--appendfsync", "everysec",
+            "--appendfsync", "always",
             "--save", "60 1",
             "--daemonize", "no",
             "--protected-mode", "yes",
