@@ -42,10 +42,14 @@ import ctypes
 import logging
 import math
 import os
+import re
+import shutil
 import signal
 import socket
+import tempfile
 import time
 import uuid
+from pathlib import Path
 from types import FrameType
 from typing import Any
 
@@ -69,23 +73,34 @@ from service.store import store_from_settings
 SCHEDULER_LOCK_STALE_S = 10.0
 """A scheduler lock not refreshed for this long belongs to a dead scheduler (a live one refreshes it every
 second, RQ's scheduler interval), and is freed for another worker's scheduler."""
+HORSE_TEMP_PREFIX = "hgrender-horse{pid}-"
+"""Prefix of the temporary folders of the work horse with process id ``pid`` (``worker.tasks``)."""
 _PR_SET_PDEATHSIG = 1
 _REDIS_BACKOFF_CAP_S = 1.0
 
 log = logging.getLogger(__name__)
 
 
+def die_with_parent(signum: signal.Signals, parent_pid: int) -> bool:
+    """Ask Linux to send ``signum`` to this process when its parent dies (``PR_SET_PDEATHSIG``); False
+    when the parent (``parent_pid``, read before the fork) is already gone."""
+    ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signum)
+    return os.getppid() == parent_pid
+
+
 class RenderScheduler(RQScheduler):
     """RQ's scheduler, as a child process that ends (gracefully: SIGTERM, releasing its locks) when the
     worker that forked it dies, instead of living on orphaned with the locks."""
 
+    worker_pid = 0
+
+    def start(self) -> Any:
+        self.worker_pid = os.getpid()
+        return super().start()
+
     def work(self) -> None:
-        parent_pid = os.getppid()
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
-        if os.getppid() != parent_pid:  # the worker died before the request took effect
-            return
-        super().work()
+        if die_with_parent(signal.SIGTERM, self.worker_pid):
+            super().work()
 
 
 class RenderWorker(Worker):
@@ -94,6 +109,8 @@ class RenderWorker(Worker):
     step that died (both from ``settings``)."""
 
     _handing_back_job_id: str | None = None
+    _last_horse_pid: int = 0
+    _worker_pid: int = 0
     executing: tuple[Job, Queue] | None = None
     """The chunk being executed and its queue; still set when ``execute_job`` ended with an exception
     (Redis lost mid-chunk), so that ``recover_after_outage`` can hand it back."""
@@ -137,6 +154,7 @@ class RenderWorker(Worker):
         """RQ's maintenance (restart a dead scheduler child, clean registries: abandoned chunks are retried
         here), after freeing scheduler locks whose holder died."""
         self.free_stale_scheduler_locks()
+        remove_dead_horse_temp_dirs()
         super().run_maintenance_tasks()
 
     def free_stale_scheduler_locks(self) -> list[str]:
@@ -165,6 +183,25 @@ class RenderWorker(Worker):
         self.executing = (job, queue)
         super().execute_job(job, queue)
         self.executing = None
+
+    def fork_work_horse(self, job: Job, queue: Queue) -> None:
+        self._worker_pid = os.getpid()
+        super().fork_work_horse(job, queue)
+        self._last_horse_pid = self.horse_pid
+
+    def main_work_horse(self, job: Job, queue: Queue) -> None:
+        """The forked horse: it dies with its worker (SIGKILL; the chunk is then retried once the
+        worker's heartbeat lapsed), rather than render on unsupervised as an orphan."""
+        if not die_with_parent(signal.SIGKILL, self._worker_pid):
+            os._exit(1)
+        super().main_work_horse(job, queue)
+
+    def monitor_work_horse(self, job: Job, queue: Queue, execution: Execution) -> None:
+        """RQ's monitoring; then whatever a killed horse left in its temporary folders is removed."""
+        try:
+            super().monitor_work_horse(job, queue, execution)
+        finally:
+            remove_horse_temp_dirs(self._last_horse_pid)
 
     def get_heartbeat_ttl(self, job: Job, working_time: float = 0.0) -> int:
         monitoring_s = self.job_monitoring_interval
@@ -251,6 +288,25 @@ class RenderWorker(Worker):
             self.cleanup_execution(job, pipeline=pipeline, execution=execution)
             pipeline.execute()
         self.log.info("Worker %s: handed job %s back to queue %s", self.name, job.id, queue.name)
+
+
+def remove_horse_temp_dirs(horse_pid: int) -> None:
+    """Delete the temporary folders of the (ended) work horse ``horse_pid``: a horse killed mid-chunk
+    (SIGKILL, out of memory, a cancel) cannot run its own clean-up."""
+    if horse_pid <= 0:
+        return
+    for path in Path(tempfile.gettempdir()).glob(HORSE_TEMP_PREFIX.format(pid=horse_pid) + "*"):
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def remove_dead_horse_temp_dirs() -> None:
+    """Delete the temporary folders of every work horse on this host that no longer runs (one killed
+    together with its worker, which could not clean up after it)."""
+    pattern = re.compile(re.escape(HORSE_TEMP_PREFIX).replace(r"\{pid\}", r"(\d+)"))
+    for path in Path(tempfile.gettempdir()).glob(HORSE_TEMP_PREFIX.format(pid="*") + "*"):
+        match = pattern.match(path.name)
+        if match and not Path(f"/proc/{match.group(1)}").exists():
+            shutil.rmtree(path, ignore_errors=True)
 
 
 def worker_name() -> str:

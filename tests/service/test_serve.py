@@ -22,8 +22,11 @@ from tests.service.conftest import EXAMPLES_DIR, tiny_scene, wait_for
 pytestmark = pytest.mark.slow
 
 
-def start_serve(data_dir: Path, port: int, workers: int) -> subprocess.Popen[bytes]:
+def start_serve(
+    data_dir: Path, port: int, workers: int, extra_env: dict[str, str] | None = None
+) -> subprocess.Popen[bytes]:
     env = {k: v for k, v in os.environ.items() if k != "REDIS_URL" and not k.startswith("HGRENDER_")}
+    env |= extra_env or {}
     command = [
         sys.executable,
         "-c",
@@ -36,7 +39,7 @@ def start_serve(data_dir: Path, port: int, workers: int) -> subprocess.Popen[byt
         "--workers",
         str(workers),
     ]
-    log = (data_dir.parent / f"serve-{port}.log").open("wb")
+    log = (data_dir.parent / f"serve-{port}.log").open("ab")
     process = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
 
     def ready() -> bool:
@@ -125,3 +128,33 @@ def redis_servers_in(directory: Path) -> list[int]:
         except OSError:  # the process ended meanwhile
             continue
     return pids
+
+
+def test_serve_says_where_it_listens_and_a_busy_port_creates_nothing(tmp_path: Path) -> None:
+    data_dir = tmp_path / "data"
+    port = free_loopback_port()
+    first = start_serve(data_dir, port, workers=0)
+    try:
+        printed = (tmp_path / f"serve-{port}.log").read_text()
+        url = f"http://127.0.0.1:{port}"
+        for line in (
+            f"hgrender serve: API      {url}",
+            f"hgrender serve: viewer   {url}/",
+            f"hgrender serve: token    {data_dir.resolve() / 'admin.token'}",
+            f"hgrender serve: data dir {data_dir.resolve()}",
+        ):
+            assert line in printed, printed
+        other = tmp_path / "other"
+        command = [sys.executable, "-c", "import sys; from hgrender.cli import main; sys.exit(main())"]
+        second = subprocess.run(
+            [*command, "serve", "--port", str(port), "--data-dir", str(other), "--workers", "0"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert second.returncode != 0
+        assert f"cannot listen on 127.0.0.1:{port}" in second.stderr and "--port" in second.stderr
+        assert not other.exists(), "a failed serve created its data dir"
+        assert len(redis_servers_in(data_dir / "redis")) == 1
+    finally:
+        stop_serve(first)
