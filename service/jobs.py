@@ -496,8 +496,10 @@ class JobService:
         live: set[str] = set()
         for queue in self._queues.values():
             live |= set(queue.get_job_ids()) | set(queue.intermediate_queue.get_job_ids())
-            live |= set(queue.started_job_registry.get_job_ids())
-            live |= set(queue.scheduled_job_registry.get_job_ids())
+            # Without RQ's cleanup: abandoned chunks are the workers' to retry (their exception handlers
+            # also fail the job of a final step that died on its last attempt).
+            live |= set(queue.started_job_registry.get_job_ids(cleanup=False))
+            live |= set(queue.scheduled_job_registry.get_job_ids(cleanup=False))
         stranded: dict[str, str] = {}
         for job_id in self._unfinished_job_ids():
             chunk_count = int(self.client.hget(_JOB_KEY.format(job_id), "chunks") or 0)

@@ -1,7 +1,9 @@
 """The RQ worker that runs render chunks: queue order, heartbeats, and detection of dead workers' chunks.
 
 RQ forks a work horse per job (a native crash or SIGKILL of the horse fails only that attempt; the
-worker then retries the chunk per its ``Retry``). A chunk whose whole worker died stays in the queue's
+worker then retries the chunk per its ``Retry``, at the front of its queue). A horse dies with its worker
+(``PR_SET_PDEATHSIG``) instead of rendering on as an orphan, and the worker removes the temporary folders
+of any horse that was killed. A chunk whose whole worker died stays in the queue's
 StartedJobRegistry until its heartbeat lapses; any live worker's maintenance pass then retries it
 (``StartedJobRegistry.cleanup`` → ``job.retry``). Two knobs decide how soon: the heartbeat TTL, which
 RQ fixes at monitoring interval + 60 s and this worker makes ``worker_heartbeat_grace_s``, and the

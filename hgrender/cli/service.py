@@ -286,7 +286,8 @@ def serve_command(args: argparse.Namespace) -> int:
             client = redis_client(settings.redis_url)
             ensure_admin_token(client, token_file)
             client.close()
-        reconcile(settings, confirm_after_s=0.0)  # no worker runs yet: nothing is in flight
+        # With its private Redis no worker runs yet, so nothing is in flight and one look suffices.
+        reconcile(settings, confirm_after_s=0.0 if redis_server is not None else 2.0)
         if redis_server is not None:
             redis_supervisor = RedisSupervisor(redis_server, settings)
             redis_supervisor.start()

@@ -15,6 +15,7 @@ from typing import Any
 
 import httpx
 import pytest
+import redis
 from rq.job import Job as RQJob
 from rq.scheduler import RQScheduler
 
@@ -244,7 +245,11 @@ def test_the_scheduler_dies_with_its_worker_and_frees_its_lock(live_service: Liv
     worker = service.start_worker("holder")
     lock = RQScheduler.get_locking_key("default")
     holder = wait_for(lambda: service.redis.get(lock), 30, "the worker's scheduler to take the lock")
-    scheduler_pid = int(service.redis.hget(f"rq:scheduler:{holder.decode()}", "pid") or 0)
+    scheduler_pid = wait_for(
+        lambda: int(service.redis.hget(f"rq:scheduler:{holder.decode()}", "pid") or 0),
+        30,
+        "the scheduler process to register",
+    )
     assert scheduler_pid in _children(worker.pid)
     os.kill(worker.pid, signal.SIGKILL)  # the worker alone, not its process group
     worker.wait()
@@ -336,3 +341,24 @@ def test_cancel_of_a_running_job_leaves_no_chunk_running(live_service: LiveServi
     time.sleep(1.5)  # the horse is stopped; nothing may write "running" afterwards
     assert {c["status"] for c in client.get(job_id)["chunks"]} == {"canceled"}
     service.stop_workers()
+
+
+@pytest.mark.slow
+def test_a_worker_waits_for_redis_instead_of_crash_looping(live_service: LiveService, tmp_path: Path) -> None:
+    from service.redis_server import RedisServer, free_loopback_port
+
+    port = free_loopback_port()
+    worker = live_service.start_worker("patient", REDIS_URL=f"redis://127.0.0.1:{port}/0")
+    log = live_service.settings.data_dir / "worker-patient.log"
+    try:
+        wait_for(
+            lambda: log.exists() and log.read_text().count("Redis unavailable") >= 2, 60, "retries logged"
+        )
+        assert worker.poll() is None  # still the same process: no exit, no restart loop
+        with RedisServer(tmp_path / "late-redis", port=port) as late:
+            client = redis.Redis.from_url(late.url)
+            wait_for(lambda: client.smembers("rq:workers"), 30, "the worker to register once Redis is up")
+            client.close()
+            live_service.stop_workers()
+    finally:
+        live_service.stop_workers()
