@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", type=int, default=10)
     parser.add_argument("--size", type=int, default=32)
-    parser.add_argument("--spp", type=int, default=2048)
+    parser.add_argument("--spp", type=int, default=8192)
     parser.add_argument("--output", default="recovery", help="bench/results/<output>.json")
     args = parser.parse_args(argv if argv is not None else [])
     results = {

@@ -557,7 +557,9 @@ class JobService:
         except NoSuchJobError:
             self._recreate(job_id, int(record["chunks"]), rq_id, queue.name)
             return
-        queue.enqueue_job(rq_job, at_front=True)
+        # RQ's own enqueue step, without its dependency check: the merge's chunks were seen ended (and
+        # its check reads RQ's dependency bookkeeping, which may be what was lost).
+        queue._enqueue_job(rq_job, at_front=True)
 
     def _recreate(self, job_id: str, chunk_count: int, rq_id: str, queue_name: str) -> None:
         """Recreate a lost RQ job the way ``create`` made it, then put it at the front of its queue."""
@@ -569,7 +571,7 @@ class JobService:
             chunks = RQJob.fetch_many(rq_ids(job_id, chunk_count)[:-1], connection=self.client)
             if all(c is not None and c.get_status(refresh=False) in _RQ_ENDED for c in chunks):
                 merge = RQJob.fetch(rq_id, connection=self.client)
-                self._queues[queue_name].enqueue_job(merge, at_front=True)  # nobody else will
+                self._queues[queue_name]._enqueue_job(merge, at_front=True)  # nobody else will
 
     def delete(self, job_id: str) -> None:
         """Remove the job everywhere: stop it if needed, then its RQ jobs, record, indexes, artifacts."""

@@ -204,6 +204,23 @@ def test_reconciliation_requeues_stranded_and_lost_chunks(live_service: LiveServ
     )
     assert RQJob.fetch(merge_rq_id(job_id), connection=service.redis).get_status() == "deferred"
     jobs.cancel(job_id)
+    # A merge still deferred after all its chunks ended (the dependents' enqueue was lost).
+    job_id = service.client().submit(tiny_scene(), chunks=2)["id"]
+    for index in range(2):
+        chunk = RQJob.fetch(chunk_rq_id(job_id, index), connection=service.redis)
+        service.redis.lrem("rq:queue:default", 0, chunk.id)
+        chunk.set_status("finished")
+    assert jobs.stranded_rq_jobs() == {merge_rq_id(job_id): "deferred after its chunks ended"}
+    jobs.reconcile(confirm_after_s=0.1)
+    assert service.redis.lindex("rq:queue:default", 0).decode() == merge_rq_id(job_id)
+    assert jobs.stranded_rq_jobs() == {}
+    # The merge itself lost after its chunks ended: recreated and enqueued.
+    service.redis.lrem("rq:queue:default", 0, merge_rq_id(job_id))
+    RQJob.fetch(merge_rq_id(job_id), connection=service.redis).delete()
+    assert jobs.reconcile(confirm_after_s=0.1) == {merge_rq_id(job_id): "missing"}
+    assert service.redis.lindex("rq:queue:default", 0).decode() == merge_rq_id(job_id)
+    assert RQJob.fetch(merge_rq_id(job_id), connection=service.redis).func_name == "worker.tasks.merge_task"
+    jobs.cancel(job_id)
 
 
 # ---- through workers ------------------------------------------------------------------------------------
