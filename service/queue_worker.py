@@ -375,7 +375,8 @@ def run_worker(settings: Settings, *, burst: bool = False, name: str | None = No
             worker.work(burst=burst, with_scheduler=True, logging_level="INFO")
         except (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError) as error:
             log.warning("Worker %s: lost Redis (%s); waiting for it", worker.name, error)
-        if burst or worker._stop_requested:
+        # RQ records a stop request (SIGTERM/SIGINT, idle or busy) by its date.
+        if burst or worker._stop_requested or worker._shutdown_requested_date is not None:
             return 0
         recover_after_outage(worker, probe)
 

@@ -43,6 +43,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     worker = subparsers.add_parser("worker", help="run one queue worker against REDIS_URL and the store")
     worker.add_argument("--burst", action="store_true", help="exit when the queues are empty")
     worker.add_argument("--name", default=None, help="worker name (default: host name + random suffix)")
+    worker.add_argument(
+        "--exit-with",
+        type=int,
+        default=None,
+        metavar="PID",
+        help="warm-shut down when process PID, this worker's parent, dies (hgrender serve passes its own)",
+    )
     worker.set_defaults(handler=worker_command)
 
     client_options = argparse.ArgumentParser(add_help=False)
@@ -149,7 +156,8 @@ class WorkerSupervisor:
         self._thread = threading.Thread(target=self._supervise, name="worker-supervisor", daemon=True)
 
     def _spawn(self) -> subprocess.Popen[bytes]:
-        return subprocess.Popen(worker_command_line(), env=self.env)
+        # A worker outlives no `serve` (not even a SIGKILLed one): it shuts down when its parent dies.
+        return subprocess.Popen(worker_command_line("--exit-with", str(os.getpid())), env=self.env)
 
     def start(self) -> None:
         self.processes = [self._spawn() for _ in range(self.count)]
@@ -171,6 +179,9 @@ class WorkerSupervisor:
                     self.processes[i] = self._spawn()
                     self._backoffs[i].restarted()
                     dead.discard(i)
+        # Linux signals a child's parent death when the *thread* that started it ends: this thread stays
+        # (parked, a daemon) so the workers it restarted are not told to stop twice (a cold shutdown).
+        threading.Event().wait()
 
     def stop(self, timeout_s: float = 30.0) -> None:
         """Warm shutdown (SIGTERM: RQ finishes nothing new and exits), SIGKILL after ``timeout_s``."""
@@ -347,6 +358,11 @@ def worker_command(args: argparse.Namespace) -> int:
     from service.queue_worker import run_worker
     from worker.tasks import preload_renderer
 
+    if args.exit_with is not None:
+        from service.queue_worker import die_with_parent
+
+        if not die_with_parent(signal.SIGTERM, args.exit_with):
+            raise CliError(f"exit-with: process {args.exit_with} is not this worker's parent (any more)")
     settings = Settings()
     preload_renderer()  # forked work horses inherit the imported renderer
     return run_worker(settings, burst=args.burst, name=args.name)

@@ -28,7 +28,7 @@ import redis
 
 from hgrender.client import HgrenderClient
 from service.redis_server import free_loopback_port
-from tests.service.conftest import tiny_scene, wait_for
+from tests.service.conftest import children_of, is_alive, tiny_scene, wait_for
 from tests.service.test_serve import redis_servers_in, start_serve, stop_serve
 
 pytestmark = pytest.mark.slow
@@ -45,20 +45,6 @@ CHAOS_ENV = {
     "HGRENDER_REGRESSION_SCHEDULER": "false",
     "HGRENDER_RENDER_THREADS": "1",
 }
-
-
-def _parent_pid(pid: int) -> int | None:
-    try:
-        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 class Chaos:
@@ -86,20 +72,12 @@ class Chaos:
 
     def workers(self) -> list[int]:
         return [
-            p for p in self._children(self.serve.pid) if b"worker" in Path(f"/proc/{p}/cmdline").read_bytes()
-        ]
-
-    @staticmethod
-    def _children(pid: int) -> list[int]:
-        return [
-            int(p.name)
-            for p in Path("/proc").iterdir()
-            if p.name.isdigit() and _parent_pid(int(p.name)) == pid
+            p for p in children_of(self.serve.pid) if b"worker" in Path(f"/proc/{p}/cmdline").read_bytes()
         ]
 
     def _kill(self, what: str, pid: int, sig: signal.Signals = signal.SIGKILL) -> None:
         self.seen.add(pid)
-        self.seen.update(c for w in self.workers() for c in self._children(w))
+        self.seen.update(c for w in self.workers() for c in children_of(w))
         self.log.append(f"{time.monotonic():.1f} {sig.name} {what} {pid}")
         os.kill(pid, sig)
 
@@ -114,7 +92,7 @@ class Chaos:
             for key, value in fields.items()
             if key.endswith(".status") and value == "running" and fields.get(key.replace("status", "pid"))
         ]
-        pids = [p for p in pids if _alive(p)]
+        pids = [p for p in pids if is_alive(p)]
         if pids:
             self._kill("horse", rng.choice(pids))
 
@@ -127,7 +105,7 @@ class Chaos:
         client = self.redis()
         holder = client.get("rq:scheduler-lock:default")
         pid = client.hget(f"rq:scheduler:{holder.decode()}", "pid") if holder else None
-        if pid and _alive(int(pid)):
+        if pid and is_alive(int(pid)):
             self._kill("scheduler", int(pid))
 
     def kill_redis(self, _rng: random.Random, job_ids: list[str]) -> None:
@@ -221,4 +199,4 @@ def test_every_job_succeeds_exactly_once_under_chaos(tmp_path: Path) -> None:
         chaos.seen.update(chaos.workers())
         chaos.seen.update(redis_servers_in(data_dir / "redis"))
         stop_serve(chaos.serve)
-    wait_for(lambda: not [p for p in chaos.seen if _alive(p)], 15, "every process seen to be gone")
+    wait_for(lambda: not [p for p in chaos.seen if is_alive(p)], 15, "every process seen to be gone")

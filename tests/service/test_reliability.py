@@ -21,7 +21,7 @@ from rq.scheduler import RQScheduler
 
 from service.jobs import JobService, chunk_rq_id, merge_rq_id
 from service.store import store_from_settings
-from tests.service.conftest import LiveService, http_get, tiny_scene, wait_for
+from tests.service.conftest import LiveService, children_of, http_get, is_alive, tiny_scene, wait_for
 
 
 def post_job(service: LiveService, body: Any, **kwargs: Any) -> httpx.Response:
@@ -243,18 +243,6 @@ def test_merges_run_ahead_of_the_backlog_so_jobs_finish_in_order(live_service: L
     service.stop_workers()
 
 
-def _children(pid: int) -> list[int]:
-    children = []
-    for proc in Path("/proc").iterdir():
-        if proc.name.isdigit():
-            try:
-                if int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
-                    children.append(int(proc.name))
-            except (OSError, IndexError, ValueError):
-                continue
-    return children
-
-
 @pytest.mark.slow
 def test_the_scheduler_dies_with_its_worker_and_frees_its_lock(live_service: LiveService) -> None:
     service = live_service
@@ -267,23 +255,16 @@ def test_the_scheduler_dies_with_its_worker_and_frees_its_lock(live_service: Liv
         30,
         "the scheduler process to register",
     )
-    assert scheduler_pid in _children(worker.pid)
+    assert scheduler_pid in children_of(worker.pid)
     os.kill(worker.pid, signal.SIGKILL)  # the worker alone, not its process group
     worker.wait()
     wait_for(
-        lambda: not Path(f"/proc/{scheduler_pid}").exists() or _zombie(scheduler_pid),
+        lambda: not is_alive(scheduler_pid),
         10,
         "the scheduler to exit",
     )
     wait_for(lambda: service.redis.get(lock) != holder, 10, "the scheduler lock to be released")
     service.stop_workers()
-
-
-def _zombie(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
-    except OSError:
-        return True
 
 
 @pytest.mark.slow

@@ -16,8 +16,8 @@ import pytest
 
 from hgrender.cli import main as hgrender_main
 from hgrender.client import HgrenderClient
-from service.redis_server import free_loopback_port
-from tests.service.conftest import EXAMPLES_DIR, tiny_scene, wait_for
+from service.redis_server import free_loopback_port, servers_working_in
+from tests.service.conftest import EXAMPLES_DIR, children_of, is_alive, tiny_scene, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -116,45 +116,29 @@ def test_serve_restart_keeps_queued_jobs_and_cli_works(
 
 def redis_servers_in(directory: Path) -> list[int]:
     """PIDs of redis-server processes working in ``directory``."""
-    pids = []
-    for proc in Path("/proc").iterdir():
-        try:
-            if (
-                proc.name.isdigit()
-                and (proc / "comm").read_text().strip() == "redis-server"
-                and Path(os.readlink(proc / "cwd")) == directory.resolve()
-            ):
-                pids.append(int(proc.name))
-        except OSError:  # the process ended meanwhile
-            continue
-    return pids
+    return servers_working_in(directory)
 
 
-def test_serve_says_where_it_listens_and_a_busy_port_creates_nothing(tmp_path: Path) -> None:
+def test_a_sigkilled_serve_leaves_no_worker_and_its_redis_is_replaced(tmp_path: Path) -> None:
+    """Workers shut down when their `serve` dies; the Redis it leaves behind is stopped by the next
+    `serve` on the same data dir before it starts its own (one AOF, one writer), and the jobs live on."""
     data_dir = tmp_path / "data"
     port = free_loopback_port()
-    first = start_serve(data_dir, port, workers=0)
+    first = start_serve(data_dir, port, workers=1)
+    workers = [p for p in children_of(first.pid) if b"worker" in Path(f"/proc/{p}/cmdline").read_bytes()]
+    assert len(workers) == 1
+    token = (data_dir / "admin.token").read_text().strip()
+    with HgrenderClient(f"http://127.0.0.1:{port}", token) as client:
+        job_id = client.submit(tiny_scene(), chunks=2)["id"]
+    (old_redis,) = redis_servers_in(data_dir / "redis")
+    first.kill()
+    first.wait()
+    wait_for(lambda: not any(is_alive(p) for p in workers), 30, "the orphaned worker to shut down")
+    second = start_serve(data_dir, port, workers=1)
     try:
-        printed = (tmp_path / f"serve-{port}.log").read_text()
-        url = f"http://127.0.0.1:{port}"
-        for line in (
-            f"hgrender serve: API      {url}",
-            f"hgrender serve: viewer   {url}/",
-            f"hgrender serve: token    {data_dir.resolve() / 'admin.token'}",
-            f"hgrender serve: data dir {data_dir.resolve()}",
-        ):
-            assert line in printed, printed
-        other = tmp_path / "other"
-        command = [sys.executable, "-c", "import sys; from hgrender.cli import main; sys.exit(main())"]
-        second = subprocess.run(
-            [*command, "serve", "--port", str(port), "--data-dir", str(other), "--workers", "0"],
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
-        assert second.returncode != 0
-        assert f"cannot listen on 127.0.0.1:{port}" in second.stderr and "--port" in second.stderr
-        assert not other.exists(), "a failed serve created its data dir"
+        assert not is_alive(old_redis)
         assert len(redis_servers_in(data_dir / "redis")) == 1
+        with HgrenderClient(f"http://127.0.0.1:{port}", token) as client:
+            assert client.wait(job_id, timeout_s=120)["status"] == "succeeded"
     finally:
-        stop_serve(first)
+        stop_serve(second)
