@@ -3,6 +3,7 @@ and the CLI client commands against it."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -133,12 +134,17 @@ def test_a_sigkilled_serve_leaves_no_worker_and_its_redis_is_replaced(tmp_path: 
     (old_redis,) = redis_servers_in(data_dir / "redis")
     first.kill()
     first.wait()
-    wait_for(lambda: not any(is_alive(p) for p in workers), 30, "the orphaned worker to shut down")
-    second = start_serve(data_dir, port, workers=1)
+    second = None
     try:
+        wait_for(lambda: not any(is_alive(p) for p in workers), 30, "the orphaned worker to shut down")
+        second = start_serve(data_dir, port, workers=1)
         assert not is_alive(old_redis)
         assert len(redis_servers_in(data_dir / "redis")) == 1
         with HgrenderClient(f"http://127.0.0.1:{port}", token) as client:
             assert client.wait(job_id, timeout_s=120)["status"] == "succeeded"
     finally:
-        stop_serve(second)
+        if second is not None:
+            stop_serve(second)
+        for pid in [*workers, *redis_servers_in(data_dir / "redis")]:  # whatever a failure left behind
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
