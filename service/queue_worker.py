@@ -75,6 +75,8 @@ from service.store import store_from_settings
 SCHEDULER_LOCK_STALE_S = 10.0
 """A scheduler lock not refreshed for this long belongs to a dead scheduler (a live one refreshes it every
 second, RQ's scheduler interval), and is freed for another worker's scheduler."""
+RECONCILE_DUE_KEY = "hgrender:reconcile-due"
+"""Exists (with a TTL of ``reconcile_interval_s``) while the last periodic reconciliation is recent."""
 HORSE_TEMP_PREFIX = "hgrender-horse{pid}-"
 """Prefix of the temporary folders of the work horse with process id ``pid`` (``worker.tasks``)."""
 _PR_SET_PDEATHSIG = 1
@@ -157,7 +159,21 @@ class RenderWorker(Worker):
         here), after freeing scheduler locks whose holder died."""
         self.free_stale_scheduler_locks()
         remove_dead_horse_temp_dirs()
+        self.reconcile_if_due()
         super().run_maintenance_tasks()
+
+    def reconcile_if_due(self) -> dict[str, str]:
+        """Once per ``reconcile_interval_s`` across all workers (a Redis key decides which), re-enqueue the
+        stranded steps of unfinished jobs (``JobService.reconcile``): a worker killed between two of RQ's
+        steps (a merge marked queued but pushed to no queue, say) must not leave a job unfinished."""
+        interval_s = self.settings.reconcile_interval_s
+        if not self.connection.set(RECONCILE_DUE_KEY, self.name, nx=True, ex=interval_s):
+            return {}
+        jobs = JobService(self.connection, store_from_settings(self.settings), self.settings)
+        revived = jobs.reconcile()
+        for rq_id, reason in revived.items():
+            self.log.warning("Worker %s: re-enqueued stranded %s (%s)", self.name, rq_id, reason)
+        return revived
 
     def free_stale_scheduler_locks(self) -> list[str]:
         """Delete each queue's scheduler lock that went unrefreshed for ``SCHEDULER_LOCK_STALE_S``; return

@@ -69,6 +69,12 @@ class Settings(BaseSettings):
     worker_maintenance_interval_s: int = Field(
         5, ge=1, description="How often idle workers look for abandoned chunks of dead workers."
     )
+    reconcile_interval_s: int = Field(
+        30,
+        ge=1,
+        description="How often one worker checks that every unfinished job's chunks are queued, running or "
+        "scheduled somewhere, and re-enqueues those that are not (a crash between two steps can strand one).",
+    )
     worker_redis_outage_s: float = Field(
         30.0,
         gt=0,

@@ -44,6 +44,7 @@ CHAOS_ENV = {
     "HGRENDER_WORKER_SHUTDOWN_GRACE_S": "2",
     "HGRENDER_REGRESSION_SCHEDULER": "false",
     "HGRENDER_RENDER_THREADS": "1",
+    "HGRENDER_RECONCILE_INTERVAL_S": "5",
 }
 
 
@@ -175,6 +176,14 @@ def test_every_job_succeeds_exactly_once_under_chaos(tmp_path: Path) -> None:
         print("\n".join(chaos.log))
         print(f"API answered again {chaos.api_back_s} s after each Redis kill")
         assert statuses == dict.fromkeys(job_ids, "succeeded"), chaos.log
+        for kind in (
+            "SIGKILL horse",
+            "SIGKILL worker",
+            "SIGKILL scheduler",
+            "SIGKILL redis",
+            "SIGTERM serve",
+        ):
+            assert any(kind in line for line in chaos.log), f"the driver never did {kind}: {chaos.log}"
         assert chaos.api_back_s and max(chaos.api_back_s) <= 10.0
         counts = {k.decode(): int(v) for k, v in chaos.redis().hgetall("hgrender:jobs:by_state").items()}
         assert {k: v for k, v in counts.items() if v} == {"succeeded": JOBS}  # one transition per job
