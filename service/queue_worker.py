@@ -110,7 +110,9 @@ class RenderScheduler(RQScheduler):
 class RenderWorker(Worker):
     """An RQ ``Worker`` with a configurable heartbeat grace and maintenance wake-up, whose warm shutdown
     hands its chunk back to the queue after ``worker_shutdown_grace_s``, and which fails the job of a final
-    step that died (both from ``settings``)."""
+    step that died (all from ``settings``). Its horses and scheduler die with it; its maintenance pass also
+    frees dead schedulers' locks, removes killed horses' temporary folders and, once per
+    ``reconcile_interval_s`` across workers, re-enqueues stranded steps."""
 
     _handing_back_job_id: str | None = None
     _last_horse_pid: int = 0

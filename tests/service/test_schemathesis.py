@@ -22,6 +22,9 @@ def test_no_server_errors_from_openapi_fuzzing(live_service: LiveService, tmp_pa
         f"{live_service.base_url}/openapi.json",
         "--checks",
         "not_a_server_error",
+        # /readyz answers 503 by design here: these tests run no queue worker, so the service is not ready.
+        "--exclude-path",
+        "/readyz",
         "--max-examples",
         "8",
         "--phases",
