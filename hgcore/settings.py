@@ -57,13 +57,29 @@ class Settings(BaseSettings):
         "(workers share the cores instead of oversubscribing them), elsewhere all cores.",
     )
     worker_monitoring_interval_s: int = Field(
-        10, ge=1, description="How often a worker heartbeats while its work horse renders."
+        5, ge=1, description="How often a worker heartbeats while its work horse renders."
     )
     worker_heartbeat_grace_s: int = Field(
-        60, ge=1, description="Seconds without heartbeat after which a running chunk counts as abandoned."
+        10,
+        ge=1,
+        description="Seconds past a missed heartbeat after which a running chunk counts as abandoned "
+        "(its worker died); the heartbeat comes from the worker process, not the render, so a long chunk "
+        "keeps beating.",
     )
     worker_maintenance_interval_s: int = Field(
-        60, ge=1, description="How often workers look for abandoned chunks of dead workers."
+        5, ge=1, description="How often idle workers look for abandoned chunks of dead workers."
+    )
+    reconcile_interval_s: int = Field(
+        30,
+        ge=1,
+        description="How often one worker checks that every unfinished job's chunks are queued, running or "
+        "scheduled somewhere, and re-enqueues those that are not (a crash between two steps can strand one).",
+    )
+    worker_redis_outage_s: float = Field(
+        30.0,
+        gt=0,
+        description="Workers retry each Redis command this long (back-off ≤ 1 s) before they give up the "
+        "chunk, wait for Redis and start over.",
     )
     worker_ttl_s: int = Field(
         420, ge=5, description="Lifetime of an idle worker's registration between beats."

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from pxr import Sdf, Tf
 
-from schemas.errors import SceneError
+from schemas.errors import SceneError, without_paths
 from schemas.limits import SceneLimits
 from schemas.scene import check_bundle_relative_path
 
@@ -142,7 +142,7 @@ def _open_layer(identifier: str, bundle_dir: Path, limits: SceneLimits, where: s
     try:
         layer = Sdf.Layer.FindOrOpen(identifier)
     except Tf.ErrorException as error:
-        detail = str(error).strip().splitlines()[-1] if str(error).strip() else "unreadable"
+        detail = without_paths(str(error).strip().splitlines()[-1]) if str(error).strip() else "unreadable"
         raise SceneError.at(where, f"cannot read USD layer {outer_file.name}: {detail}") from None
     if layer is None:
         raise SceneError.at(where, f"cannot read USD layer {outer_file.name}")

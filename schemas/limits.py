@@ -1,6 +1,9 @@
 """Resource limits on accepted scenes, configurable per deployment through ``HGRENDER_MAX_*`` variables.
 
-Every limit guards the API and workers against scenes that are too expensive to parse or render.
+Every limit guards the API and workers against scenes that are too expensive to parse or render. The
+collection limits (materials, shapes, emitters, mesh sizes, spectrum tables, strings) are checked on the
+raw document before the schema validates it, so an oversized scene costs one walk over its JSON, never a
+full validation or a render.
 """
 
 from __future__ import annotations
@@ -29,6 +32,14 @@ class SceneLimits(BaseSettings):
         2_000_000, ge=1, description="Largest total triangle count over all meshes (inline, files, USD)."
     )
     max_vertices: int = Field(2_000_000, ge=1, description="Largest total vertex count over all meshes.")
+    max_materials: int = Field(1000, ge=1, description="Largest number of materials in a scene.")
+    max_emitters: int = Field(1000, ge=1, description="Largest number of emitters in a scene.")
+    max_spectrum_samples: int = Field(
+        4096, ge=2, le=10000, description="Largest number of samples of one tabulated spectrum."
+    )
+    max_string_chars: int = Field(
+        1024, ge=64, description="Longest string (value or object key) anywhere in a scene document."
+    )
     max_file_bytes: int = Field(
         64 * 1024 * 1024, ge=1, description="Largest single uploaded file (JSON, USD layer, mesh), bytes."
     )

@@ -40,6 +40,7 @@ from hgcore.settings import Settings
 from hgcore.store.base import ArtifactStore
 
 _IDEMPOTENCY_WAIT_S = 2.0
+_RQ_ENDED = frozenset({RQJobStatus.FINISHED, RQJobStatus.FAILED, RQJobStatus.STOPPED, RQJobStatus.CANCELED})
 
 
 class JobConflictError(Exception):
@@ -232,9 +233,23 @@ class JobService(JobRecords):
             raise JobConflictError(f"status: job is already {current.status.value}")
         for rq_id in rq_ids(job_id, view.chunks_total):
             self._stop_rq_job(rq_id)
+        self._mark_unfinished_chunks_canceled(job_id, view.chunks_total)
         current = self.get(job_id)
         assert current is not None
         return current
+
+    def _mark_unfinished_chunks_canceled(self, job_id: str, chunk_count: int) -> None:
+        """Chunks (and the merge step) that had not finished read ``canceled``, not ``running`` or
+        ``queued`` forever: their RQ jobs were dropped or stopped above."""
+        fields = self.chunk_fields(job_id)
+        steps = [*(str(i) for i in range(chunk_count)), "merge"]
+        unfinished = {
+            f"{step}.status": "canceled"
+            for step in steps
+            if fields.get(f"{step}.status", "queued" if step != "merge" else "") in {"queued", "running"}
+        }
+        if unfinished:
+            self.client.hset(chunks_key(job_id), mapping=unfinished)
 
     def _stop_rq_job(self, rq_id: str) -> None:
         try:

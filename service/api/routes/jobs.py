@@ -12,10 +12,9 @@ from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 
 from hgcore.artifacts.keys import job_prefix
-from hgcore.jobs.records import JobNotFoundError
 from hgcore.jobs.status import JobStatus
 from hgcore.jobs.views import JobView
-from hgcore.store.base import validate_key
+from hgcore.store.base import ArtifactNotFoundError, validate_key
 from schemas import SceneLimits
 from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
 from service.events import job_events
@@ -65,7 +64,7 @@ async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str,
         if not isinstance(upload, UploadFile):
             raise ValueError("scene: multipart requests need a file field 'scene'")
         fields = {k: v for k, v in form.items() if k != "scene" and isinstance(v, str)}
-        options = JobOptions.model_validate(fields)  # lax mode: form strings → ints
+        options = JobOptions.model_validate(fields, strict=False)  # form fields are text: '4' → 4
         content = await upload.read()
         scene, files = await run_in_threadpool(
             scene_from_upload, upload.filename or "", content, options, limits
@@ -256,7 +255,7 @@ def download_artifact(
     try:
         key = validate_key(job_prefix(job_id) + name)
     except ValueError:
-        raise JobNotFoundError(f"{job_id}/{name}") from None
+        raise ArtifactNotFoundError(name) from None  # reported without echoing the name
     media_type = _MEDIA_TYPES.get("." + name.rsplit(".", 1)[-1].lower(), "application/octet-stream")
     # Streamed from one open handle: an artifact replaced meanwhile (atomic rename) is sent whole, old
     # or new, never a mix (a separate stat for Content-Length could disagree with the bytes sent).
