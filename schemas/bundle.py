@@ -17,8 +17,9 @@ from pathlib import Path
 
 from pxr import Sdf, Tf
 
+from hgcore.errors import InputError
+from hgcore.settings import SceneLimits
 from schemas.errors import SceneError, without_paths
-from schemas.limits import SceneLimits
 from schemas.scene import check_bundle_relative_path
 
 USD_LAYER_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -43,7 +44,7 @@ def extract_zip_bundle(zip_path: Path, destination: Path, limits: SceneLimits) -
         raise SceneError.at(where, f"archive exceeds the limit of {limits.max_bundle_bytes} bytes")
     destination.mkdir(parents=True, exist_ok=True)
     if any(destination.iterdir()):
-        raise ValueError(f"destination: {destination} must be empty")
+        raise InputError(f"destination: {destination} must be empty")
     total_bytes = 0
     try:
         with zipfile.ZipFile(zip_path) as archive:

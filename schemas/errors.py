@@ -5,6 +5,8 @@ from __future__ import annotations
 import re
 from typing import Any, TypedDict
 
+from hgcore.errors import InputError
+
 # USD's errors ("Error in 'pxrInternal_v0_26::Sdf_CrateFile::_ReadBootStrap' at line 3542 in file
 # /opt/USD/pxr/usd/sdf/crateFile.cpp : 'Sdf crate bootstrap section corrupt'") name the library's build
 # tree, and layer errors name the server's temporary upload folder.
@@ -21,7 +23,7 @@ class SceneProblem(TypedDict):
     message: str
 
 
-class SceneError(ValueError):
+class SceneError(InputError):
     """A scene (JSON or USD) that cannot be accepted; ``problems`` lists every located problem.
 
     ``str(error)`` starts with the first offending location, e.g. ``/shapes/2/radius_m: Input should be

@@ -47,9 +47,9 @@ import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdLux, UsdShade
 from pydantic import TypeAdapter, ValidationError
 
+from hgcore.settings import SceneLimits
 from schemas.bundle import check_usd_layers, extract_zip_bundle, is_inside
 from schemas.errors import SceneError, SceneProblem, without_paths
-from schemas.limits import SceneLimits
 from schemas.mesh_files import fan_triangulate, load_scene_meshes
 from schemas.photometry import rgb_spectrum, tinted_spectrum
 from schemas.scene import SCHEMA_ID, Emitter, Material, PerspectiveCamera, Scene, Shape

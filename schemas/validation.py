@@ -8,8 +8,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from hgcore.settings import SceneLimits
 from schemas.errors import SceneError, SceneProblem, json_pointer
-from schemas.limits import SceneLimits
 from schemas.scene import Scene
 
 

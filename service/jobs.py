@@ -23,6 +23,7 @@ from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
 from hgcore.artifacts.keys import input_key, job_prefix
+from hgcore.errors import InputError
 from hgcore.jobs.keys import (
     JOBS_BY_STATE,
     JOBS_INDEX,
@@ -68,7 +69,7 @@ class JobService(JobRecords):
         """Number of chunks for a request: the request's, else the default, never more than spp."""
         chunk_count = chunks if chunks is not None else self.settings.default_chunks
         if chunk_count > self.settings.max_chunks:
-            raise ValueError(f"chunks: {chunk_count} exceeds the limit of {self.settings.max_chunks}")
+            raise InputError(f"chunks: {chunk_count} exceeds the limit of {self.settings.max_chunks}")
         return min(chunk_count, spp)  # every chunk needs at least one sample per pixel
 
     def create(
@@ -89,7 +90,7 @@ class JobService(JobRecords):
         ``extra_files`` (relative names → bytes) are stored next to the scene (textures of a USD bundle).
         """
         if priority not in PRIORITY_QUEUES:
-            raise ValueError(f"priority: must be one of {list(PRIORITY_QUEUES)}")
+            raise InputError(f"priority: must be one of {list(PRIORITY_QUEUES)}")
         spp = int(scene["film"]["spp"])
         base_seed = int(scene["film"].get("seed", 0))
         chunk_count = self.plan(spp, chunks)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import redis
 
+from hgcore.errors import InputError
 from hgcore.redis_clients import redis_client
 
 
@@ -78,7 +79,7 @@ class RedisServer:
         """The command line: loopback only, AOF on, data and log under ``data_dir``."""
         binary = shutil.which(self.executable)
         if binary is None:
-            raise ValueError(
+            raise InputError(
                 f"executable: {self.executable!r} not found on PATH (Debian: apt install redis-server)"
             )
         return [

@@ -67,6 +67,7 @@ from rq.scheduler import RQScheduler
 from rq.scripts import release_lock
 from rq.utils import now
 
+from hgcore.errors import InputError
 from hgcore.jobs.queue_graph import FINAL_STEP_TASKS
 from hgcore.jobs.reconcile import QueueReconciler
 from hgcore.jobs.records import JobRecords
@@ -339,7 +340,7 @@ def worker_redis_client(settings: Settings) -> redis.Redis:
     """The worker's Redis client: every command is retried, with back-off capped at 1 s, for up to
     ``worker_redis_outage_s`` (the client is inherited by work horses and the scheduler child)."""
     if not settings.redis_url:
-        raise ValueError("redis_url: REDIS_URL must name the Redis server the API uses")
+        raise InputError("redis_url: REDIS_URL must name the Redis server the API uses")
     retries = math.ceil(settings.worker_redis_outage_s / _REDIS_BACKOFF_CAP_S)
     retry = Retry(ExponentialBackoff(cap=_REDIS_BACKOFF_CAP_S, base=0.05), retries)
     return redis_client(settings.redis_url, retry=retry, socket_connect_timeout=2.0)

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.errors import InputError
+
 
 @dataclass(frozen=True)
 class ArrayOps:
@@ -75,7 +77,7 @@ def transverse_modes(mode_count: int) -> list[tuple[int, int]]:
     by increasing order n + m, then decreasing n. Counts 1, 4, 9, 16 close the orders 0, 2, 4, 6.
     """
     if mode_count < 1:
-        raise ValueError(f"modes: must be at least 1, got {mode_count}")
+        raise InputError(f"modes: must be at least 1, got {mode_count}")
     modes: list[tuple[int, int]] = []
     order = 0
     while len(modes) < mode_count:

@@ -14,6 +14,7 @@ from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.requests import ClientDisconnect
 
+from hgcore.errors import InputError
 from hgcore.jobs.records import JobNotFoundError
 from hgcore.store.base import ArtifactNotFoundError, validate_key
 from schemas import SceneError
@@ -69,8 +70,10 @@ def install_exception_handlers(app: FastAPI) -> None:
         errors = [{k: v for k, v in e.items() if k in {"loc", "msg", "type"}} for e in error.errors()]
         return _validation_problem(errors)
 
-    @app.exception_handler(ValueError)
-    async def value_error(_: Request, error: ValueError) -> JSONResponse:
+    # Bad input names its field (hgcore.errors.InputError): 422. Any other exception, a plain ValueError
+    # included, is a bug: Starlette answers 500 and the server logs its traceback.
+    @app.exception_handler(InputError)
+    async def input_error(_: Request, error: InputError) -> JSONResponse:
         return problem(422, str(error))
 
     @app.exception_handler(AuthenticationError)
