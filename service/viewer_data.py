@@ -297,20 +297,13 @@ class DecodedImageCache:
         if not listed:
             raise ArtifactNotFoundError(IMAGE_EXR)
         cache_key = (job_id, listed[0].size_bytes)
-        with self._lock:
-            if cache_key in self._images:
-                self._images.move_to_end(cache_key)
-                return self._images[cache_key]
+        cached = self._cached(cache_key)
+        if cached is not None:
+            return cached
         with tempfile.TemporaryDirectory(prefix="hgrender-viewer-") as directory:
             path = Path(directory) / IMAGE_EXR
             self.store.get_file(key, path)
-            image = decode_exr(path)
-        with self._lock:
-            self._images[cache_key] = image
-            self._images.move_to_end(cache_key)
-            while len(self._images) > self.max_images:
-                self._images.popitem(last=False)
-        return image
+            return self._keep(cache_key, decode_exr(path))
 
     def get_partial(self, job_id: str, film: dict[str, Any]) -> DecodedImage:
         """A running job's preview from its finished chunk partials; ArtifactNotFoundError when none."""
@@ -322,17 +315,26 @@ class DecodedImageCache:
         if not listed:
             raise ArtifactNotFoundError("chunks")
         cache_key = (job_id, hash(tuple((info.key, info.size_bytes) for info in listed)))
-        with self._lock:
-            if cache_key in self._images:
-                self._images.move_to_end(cache_key)
-                return self._images[cache_key]
+        cached = self._cached(cache_key)
+        if cached is not None:
+            return cached
         with tempfile.TemporaryDirectory(prefix="hgrender-viewer-") as directory:
             paths = []
             for index, info in enumerate(listed):
-                path = Path(directory) / f"{index}.npz"
+                path = Path(directory) / f"{index}{CHUNK_PARTIAL_SUFFIX}"
                 self.store.get_file(info.key, path)
                 paths.append(path)
-            image = merge_partials(paths, film)
+            return self._keep(cache_key, merge_partials(paths, film))
+
+    def _cached(self, cache_key: tuple[str, int]) -> DecodedImage | None:
+        with self._lock:
+            if cache_key not in self._images:
+                return None
+            self._images.move_to_end(cache_key)
+            return self._images[cache_key]
+
+    def _keep(self, cache_key: tuple[str, int], image: DecodedImage) -> DecodedImage:
+        """Cache ``image`` as the most recent, dropping the least recently used beyond ``max_images``."""
         with self._lock:
             self._images[cache_key] = image
             self._images.move_to_end(cache_key)

@@ -37,21 +37,17 @@ class ArrayOps:
     def clip(self, value: Any, low: float, high: float) -> Any:
         return self.minimum(self.maximum(value, low), high)
 
+    @classmethod
+    def of(cls, name: str, library: Any, atan2: Any, where: Any) -> ArrayOps:
+        """The namespace of an array ``library`` whose element-wise functions carry the usual names;
+        ``atan2`` and ``where`` are the two that libraries name differently."""
+        functions = {f: getattr(library, f) for f in ("exp", "log", "sqrt", "sin", "cos", "abs", "floor")}
+        return cls(
+            name=name, atan2=atan2, where=where, minimum=library.minimum, maximum=library.maximum, **functions
+        )
 
-NUMPY = ArrayOps(
-    name="numpy",
-    exp=np.exp,
-    log=np.log,
-    sqrt=np.sqrt,
-    sin=np.sin,
-    cos=np.cos,
-    atan2=np.arctan2,
-    abs=np.abs,
-    minimum=np.minimum,
-    maximum=np.maximum,
-    where=np.where,
-    floor=np.floor,
-)
+
+NUMPY = ArrayOps.of("numpy", np, atan2=np.arctan2, where=np.where)
 
 
 def hermite_functions(u: Any, max_order: int, ops: ArrayOps = NUMPY) -> list[Any]:
