@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hgcore.errors import InputError
 from hgcore.optics.spectra import cie_cmf
 
 SRGB_PRIMARIES_XY: np.ndarray = np.array([[0.64, 0.33], [0.30, 0.60], [0.15, 0.06]])
@@ -52,7 +53,7 @@ def band_edges_xyz_weights(edges_nm: np.ndarray, step_nm: float = 1.0) -> np.nda
     """∫_band (x̄, ȳ, z̄) dλ for bands between consecutive ``edges_nm`` (nm); shape (B, 3), in nm."""
     edges = np.asarray(edges_nm, dtype=float)
     if edges.ndim != 1 or edges.size < 2 or not np.all(np.diff(edges) > 0.0):
-        raise ValueError("edges_nm: must be at least 2 strictly increasing band edges")
+        raise InputError("edges_nm: must be at least 2 strictly increasing band edges")
     weights = np.zeros((edges.size - 1, 3))
     for band in range(edges.size - 1):
         low_nm, high_nm = edges[band], edges[band + 1]
@@ -68,7 +69,7 @@ def band_xyz_weights(band_centers_nm: np.ndarray, step_nm: float = 1.0) -> np.nd
     """
     centers_nm = np.asarray(band_centers_nm, dtype=float)
     if centers_nm.ndim != 1 or centers_nm.size < 2 or not np.all(np.diff(centers_nm) > 0.0):
-        raise ValueError("band_centers_nm: must be at least 2 strictly increasing band centres")
+        raise InputError("band_centers_nm: must be at least 2 strictly increasing band centres")
     half_width_nm = 0.5 * float(np.mean(np.diff(centers_nm)))
     edges_nm = np.append(centers_nm - half_width_nm, centers_nm[-1] + half_width_nm)
     return band_edges_xyz_weights(edges_nm, step_nm)
@@ -95,7 +96,7 @@ def xyz_to_lab(xyz: np.ndarray, white_xyz: np.ndarray) -> np.ndarray:
     """CIELAB L*, a*, b* of ``xyz`` (..., 3) relative to the white ``white_xyz`` (3,), same units."""
     white = np.asarray(white_xyz, dtype=float)
     if white.shape != (3,) or np.any(white <= 0.0):
-        raise ValueError("white_xyz: must be three positive tristimulus values")
+        raise InputError("white_xyz: must be three positive tristimulus values")
     ratio = np.asarray(xyz, dtype=float) / white
     f = np.where(ratio > _LAB_EPSILON, np.cbrt(ratio), ratio / (3.0 * (6.0 / 29.0) ** 2) + 4.0 / 29.0)
     lightness = 116.0 * f[..., 1] - 16.0
@@ -106,7 +107,7 @@ def linear_srgb_to_xyz(linear_rgb: np.ndarray) -> np.ndarray:
     """CIE XYZ (D65, Y = 1 for white) of linear sRGB values, last axis of size 3."""
     values = np.asarray(linear_rgb, dtype=float)
     if values.shape[-1] != 3:
-        raise ValueError(f"linear_rgb: last axis must have size 3, got shape {values.shape}")
+        raise InputError(f"linear_rgb: last axis must have size 3, got shape {values.shape}")
     return values @ LINEAR_SRGB_TO_XYZ.T
 
 
@@ -114,14 +115,14 @@ def xyz_to_linear_srgb(xyz: np.ndarray) -> np.ndarray:
     """Linear sRGB (no transfer curve) of CIE XYZ values, last axis of size 3."""
     values = np.asarray(xyz, dtype=float)
     if values.shape[-1] != 3:
-        raise ValueError(f"xyz: last axis must have size 3, got shape {values.shape}")
+        raise InputError(f"xyz: last axis must have size 3, got shape {values.shape}")
     return values @ XYZ_TO_LINEAR_SRGB.T
 
 
 def linear_srgb_to_lab(linear_rgb: np.ndarray, white_level: float = 1.0) -> np.ndarray:
     """CIELAB (D65) of linear sRGB values (last axis 3); the grey (w, w, w), w = ``white_level``, is white."""
     if not white_level > 0.0:
-        raise ValueError(f"white_level: must be positive, got {white_level}")
+        raise InputError(f"white_level: must be positive, got {white_level}")
     return xyz_to_lab(linear_srgb_to_xyz(linear_rgb), D65_WHITE_XYZ * white_level)
 
 
@@ -130,7 +131,7 @@ def ciede2000(lab_reference: np.ndarray, lab_sample: np.ndarray) -> np.ndarray:
     2005); symmetric in its arguments."""
     lab_1, lab_2 = np.asarray(lab_reference, dtype=float), np.asarray(lab_sample, dtype=float)
     if lab_1.shape != lab_2.shape or lab_1.shape[-1:] != (3,):
-        raise ValueError(
+        raise InputError(
             f"lab_sample: shape {lab_2.shape} must equal lab_reference's {lab_1.shape} with a last axis "
             "of size 3 (L*, a*, b*)"
         )

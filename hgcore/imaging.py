@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from hgcore.errors import InputError
+
 TONE_MAPS = ("clamp", "reinhard", "aces")
 REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -29,7 +31,7 @@ def tone_map(linear_rgb: np.ndarray, operator: str = "clamp") -> np.ndarray:
     elif operator == "aces":
         mapped = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
     else:
-        raise ValueError(f"tonemap: must be one of {', '.join(TONE_MAPS)}, got {operator!r}")
+        raise InputError(f"tonemap: must be one of {', '.join(TONE_MAPS)}, got {operator!r}")
     return np.clip(mapped, 0.0, 1.0)
 
 
@@ -41,7 +43,7 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 def display_rgb8(linear_rgb: np.ndarray, exposure_ev: float = 0.0, operator: str = "clamp") -> np.ndarray:
     """8-bit sRGB for display: exposure, tone mapping, transfer curve, round half up."""
     if not math.isfinite(exposure_ev):
-        raise ValueError(f"ev: must be finite, got {exposure_ev}")
+        raise InputError(f"ev: must be finite, got {exposure_ev}")
     encoded = srgb_encode(tone_map(np.asarray(linear_rgb, dtype=np.float64) * 2.0**exposure_ev, operator))
     return np.floor(encoded * 255.0 + 0.5).astype(np.uint8)
 

@@ -1,7 +1,12 @@
-"""Service configuration: one pydantic-settings class read from ``HGRENDER_*`` environment variables.
+"""The settings of every hgrender server-side process, read once from ``HGRENDER_*`` environment variables.
 
-Every field is documented in ``docs/configuration.md`` (one table). ``REDIS_URL`` is read without the prefix
-(the usual name in container deployments); when it is unset, ``hgrender serve`` starts a private Redis.
+One story per process (``docs/configuration.md``): the API, each queue worker and its work horses, the
+scheduler and a local ``hgrender render`` build one ``Settings()`` at start and pass it down; ``hgrender
+serve`` hands its own to the workers it starts (``Settings.to_env``). ``SceneLimits`` is the part that
+scene validation needs (``schemas`` takes it as an argument); ``Settings`` extends it, so a process's
+settings *are* its limits. The command-line client reads only ``HGRENDER_URL`` and ``HGRENDER_TOKEN``
+(``hgrender.cli.connection``). ``REDIS_URL`` is read without the prefix (the usual name in container
+deployments); when it is unset, ``hgrender serve`` starts a private Redis.
 """
 
 from __future__ import annotations
@@ -14,14 +19,68 @@ from typing import Literal
 from pydantic import AliasChoices, Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from hgcore.errors import InputError
+
 QUEUE_NAMES: tuple[str, ...] = ("high", "default", "low")
 """RQ queues in dequeue order; a job's ``priority`` picks one."""
 
 
-class Settings(BaseSettings):
-    """All knobs of the API, the queue workers and the artifact store."""
+class SceneLimits(BaseSettings):
+    """Resource limits on accepted scenes (enforced by :func:`schemas.validation.validate_scene` and the
+    USD/mesh importers): every limit guards the API and workers against scenes too expensive to parse or
+    render. The collection limits (materials, shapes, emitters, mesh sizes, spectrum tables, strings) are
+    checked on the raw document before the schema validates it, so an oversized scene costs one walk over
+    its JSON, never a full validation or a render.
 
-    model_config = SettingsConfigDict(env_prefix="HGRENDER_", extra="ignore", validate_default=True)
+    Environment variable for each field: ``HGRENDER_`` + the field name in upper case
+    (e.g. ``HGRENDER_MAX_SPP=4096``).
+    """
+
+    model_config = SettingsConfigDict(env_prefix="HGRENDER_", extra="ignore", frozen=True)
+
+    max_resolution: int = Field(4096, ge=1, description="Largest film width or height, pixels.")
+    max_pixels: int = Field(4096 * 4096, ge=1, description="Largest film width × height, pixels.")
+    max_spp: int = Field(65536, ge=1, description="Largest samples per pixel.")
+    max_bands: int = Field(64, ge=1, le=64, description="Largest number of spectral bands.")
+    max_primitives: int = Field(
+        10000, ge=1, description="Largest number of shapes + emitters (and of geometry prims in a USD stage)."
+    )
+    max_triangles: int = Field(
+        2_000_000, ge=1, description="Largest total triangle count over all meshes (inline, files, USD)."
+    )
+    max_vertices: int = Field(2_000_000, ge=1, description="Largest total vertex count over all meshes.")
+    max_materials: int = Field(1000, ge=1, description="Largest number of materials in a scene.")
+    max_emitters: int = Field(1000, ge=1, description="Largest number of emitters in a scene.")
+    max_spectrum_samples: int = Field(
+        4096, ge=2, le=10000, description="Largest number of samples of one tabulated spectrum."
+    )
+    max_string_chars: int = Field(
+        1024, ge=64, description="Longest string (value or object key) anywhere in a scene document."
+    )
+    max_file_bytes: int = Field(
+        64 * 1024 * 1024, ge=1, description="Largest single uploaded file (JSON, USD layer, mesh), bytes."
+    )
+    max_bundle_bytes: int = Field(
+        256 * 1024 * 1024, ge=1, description="Largest total unpacked size of an uploaded bundle, bytes."
+    )
+    max_bundle_files: int = Field(1000, ge=1, description="Largest number of files in an uploaded bundle.")
+    max_usd_prims: int = Field(100_000, ge=1, description="Largest number of prims traversed in a USD stage.")
+    max_usd_memory_bytes: int = Field(
+        2 * 1024 * 1024 * 1024,
+        ge=64 * 1024 * 1024,
+        description="Address-space rlimit of the USD parser process.",
+    )
+    usd_timeout_s: float = Field(
+        60.0, gt=0.0, description="Wall-clock limit of the USD parser process, seconds."
+    )
+
+
+class Settings(SceneLimits):
+    """All knobs of the API, the queue workers, the renderer and the artifact store, and the scene limits."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="HGRENDER_", extra="ignore", validate_default=True, frozen=True
+    )
 
     data_dir: Path = Field(
         Path("./data"), description="Root for the embedded Redis, artifacts and admin token."
@@ -56,14 +115,34 @@ class Settings(BaseSettings):
         description="Dr.Jit CPU threads per rendering process; `hgrender serve` default: cores // workers "
         "(workers share the cores instead of oversubscribing them), elsewhere all cores.",
     )
+    variant: Literal["auto", "llvm_ad_spectral", "cuda_ad_spectral"] = Field(
+        "auto",
+        description="Mitsuba variant of the renderer: `auto` is CUDA where a GPU is usable, else LLVM.",
+    )
     worker_monitoring_interval_s: int = Field(
-        10, ge=1, description="How often a worker heartbeats while its work horse renders."
+        5, ge=1, description="How often a worker heartbeats while its work horse renders."
     )
     worker_heartbeat_grace_s: int = Field(
-        60, ge=1, description="Seconds without heartbeat after which a running chunk counts as abandoned."
+        10,
+        ge=1,
+        description="Seconds past a missed heartbeat after which a running chunk counts as abandoned "
+        "(its worker died); the heartbeat comes from the worker process, not the render, so a long chunk "
+        "keeps beating.",
     )
     worker_maintenance_interval_s: int = Field(
-        60, ge=1, description="How often workers look for abandoned chunks of dead workers."
+        5, ge=1, description="How often idle workers look for abandoned chunks of dead workers."
+    )
+    reconcile_interval_s: int = Field(
+        30,
+        ge=1,
+        description="How often one worker checks that every unfinished job's chunks are queued, running or "
+        "scheduled somewhere, and re-enqueues those that are not (a crash between two steps can strand one).",
+    )
+    worker_redis_outage_s: float = Field(
+        30.0,
+        gt=0,
+        description="Workers retry each Redis command this long (back-off ≤ 1 s) before they give up the "
+        "chunk, wait for Redis and start over.",
     )
     worker_ttl_s: int = Field(
         420, ge=5, description="Lifetime of an idle worker's registration between beats."
@@ -97,20 +176,20 @@ class Settings(BaseSettings):
     @classmethod
     def _intervals_non_negative(cls, value: list[int]) -> list[int]:
         if any(v < 0 for v in value):
-            raise ValueError("chunk_retry_intervals_s: intervals must be >= 0 seconds")
+            raise InputError("chunk_retry_intervals_s: intervals must be >= 0 seconds")
         return value
 
     @field_validator("regression_webhook_retry_intervals_s")
     @classmethod
     def _webhook_intervals_non_negative(cls, value: list[float]) -> list[float]:
         if any(v < 0 for v in value):
-            raise ValueError("regression_webhook_retry_intervals_s: intervals must be >= 0 seconds")
+            raise InputError("regression_webhook_retry_intervals_s: intervals must be >= 0 seconds")
         return value
 
     @model_validator(mode="after")
     def _s3_needs_bucket(self) -> Settings:
         if self.store == "s3" and not self.s3_bucket:
-            raise ValueError("s3_bucket: required when store is 's3'")
+            raise InputError("s3_bucket: required when store is 's3'")
         return self
 
     def to_env(self) -> dict[str, str]:

@@ -6,7 +6,6 @@ Import the model and validator from here; nothing in this package imports Mitsub
 from pathlib import Path
 
 from schemas.errors import SceneError, SceneProblem
-from schemas.limits import SceneLimits
 from schemas.scene import SCHEMA_ID, Scene
 from schemas.validation import validate_scene, validate_scene_json
 
@@ -18,7 +17,6 @@ __all__ = [
     "SCHEMA_ID",
     "Scene",
     "SceneError",
-    "SceneLimits",
     "SceneProblem",
     "validate_scene",
     "validate_scene_json",

@@ -17,8 +17,9 @@ from pathlib import Path
 
 from pxr import Sdf, Tf
 
-from schemas.errors import SceneError
-from schemas.limits import SceneLimits
+from hgcore.errors import InputError
+from hgcore.settings import SceneLimits
+from schemas.errors import SceneError, without_paths
 from schemas.scene import check_bundle_relative_path
 
 USD_LAYER_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -43,7 +44,7 @@ def extract_zip_bundle(zip_path: Path, destination: Path, limits: SceneLimits) -
         raise SceneError.at(where, f"archive exceeds the limit of {limits.max_bundle_bytes} bytes")
     destination.mkdir(parents=True, exist_ok=True)
     if any(destination.iterdir()):
-        raise ValueError(f"destination: {destination} must be empty")
+        raise InputError(f"destination: {destination} must be empty")
     total_bytes = 0
     try:
         with zipfile.ZipFile(zip_path) as archive:
@@ -142,7 +143,7 @@ def _open_layer(identifier: str, bundle_dir: Path, limits: SceneLimits, where: s
     try:
         layer = Sdf.Layer.FindOrOpen(identifier)
     except Tf.ErrorException as error:
-        detail = str(error).strip().splitlines()[-1] if str(error).strip() else "unreadable"
+        detail = without_paths(str(error).strip().splitlines()[-1]) if str(error).strip() else "unreadable"
         raise SceneError.at(where, f"cannot read USD layer {outer_file.name}: {detail}") from None
     if layer is None:
         raise SceneError.at(where, f"cannot read USD layer {outer_file.name}")

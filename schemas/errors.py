@@ -2,7 +2,18 @@
 
 from __future__ import annotations
 
+import re
 from typing import Any, TypedDict
+
+from hgcore.errors import InputError
+
+# USD's errors ("Error in 'pxrInternal_v0_26::Sdf_CrateFile::_ReadBootStrap' at line 3542 in file
+# /opt/USD/pxr/usd/sdf/crateFile.cpp : 'Sdf crate bootstrap section corrupt'") name the library's build
+# tree, and layer errors name the server's temporary upload folder.
+_TF_ERROR_PREFIX = re.compile(r"Error in '[^']*' at line \d+ in file \S+ : ")
+# An absolute path to a file (its last segment has an extension, which USD prim paths such as /World/Box
+# and JSON pointers never have).
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.~])/(?:[^\s'\"@<>:,;()\[\]/]+/)+([^\s'\"@<>:,;()\[\]/.]*\.\w+)")
 
 
 class SceneProblem(TypedDict):
@@ -12,7 +23,7 @@ class SceneProblem(TypedDict):
     message: str
 
 
-class SceneError(ValueError):
+class SceneError(InputError):
     """A scene (JSON or USD) that cannot be accepted; ``problems`` lists every located problem.
 
     ``str(error)`` starts with the first offending location, e.g. ``/shapes/2/radius_m: Input should be
@@ -38,3 +49,10 @@ class SceneError(ValueError):
 def json_pointer(parts: list[str | int]) -> str:
     """Join path parts into a JSON pointer, escaping ``~`` and ``/`` as RFC 6901 requires."""
     return "".join("/" + str(part).replace("~", "~0").replace("/", "~1") for part in parts)
+
+
+def without_paths(message: str) -> str:
+    """``message`` (from a parser such as USD's) with the source locations of its errors removed and every
+    absolute file path cut to its base name: an error names the user's file, never the server's folders
+    or the library's build tree."""
+    return _ABSOLUTE_PATH.sub(r"\1", _TF_ERROR_PREFIX.sub("", message))

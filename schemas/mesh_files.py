@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hgcore.settings import SceneLimits
 from schemas.bundle import resolve_bundle_file
 from schemas.errors import SceneError
-from schemas.limits import SceneLimits
 from schemas.scene import MeshFileShape, Scene
 
 

@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from hgcore.colour import xyz_to_linear_srgb
+from hgcore.errors import InputError
 from hgcore.optics.spectra import (
     cie_cmf,
     cie_illuminant,
@@ -97,7 +98,7 @@ def emitter_radiance_scale(
     assert emitter.power_w is not None  # guaranteed by the model: exactly one of the two is set
     spectral_integral = integrate_spectrum(emitter.spectrum, wavelength_min_nm, wavelength_max_nm)
     if spectral_integral <= 0.0:
-        raise ValueError("spectrum: zero over the film's wavelength range, so power_w cannot be met")
+        raise InputError("spectrum: zero over the film's wavelength range, so power_w cannot be met")
     return emitter.power_w / (math.pi * emitter_area_m2(emitter) * spectral_integral)
 
 

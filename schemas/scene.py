@@ -36,12 +36,14 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from hgcore.errors import InputError
+
 SCHEMA_ID = "hgrender/scene/v1"
 
 #: Material ids (keys of ``Scene.materials``) — safe as file names, URL parts and USD ``hg:id`` values.
 MATERIAL_ID_PATTERN = r"^[A-Za-z0-9_.-]{1,64}$"
 
-#: Hard caps built into the schema; the deployment limits in :class:`schemas.limits.SceneLimits` are lower.
+#: Hard caps built into the schema; the deployment limits in :class:`hgcore.settings.SceneLimits` are lower.
 ABSOLUTE_MAX_RESOLUTION_PX = 16384
 ABSOLUTE_MAX_SPP = 1 << 20
 MAX_FILM_MODES = 16
@@ -73,18 +75,18 @@ PsdModel = Literal["gaussian", "abc"]
 def _check_direction(value: list[float], field_name: str) -> list[float]:
     """Directions (normals, up vectors, axes) need a non-zero length; they are normalised by consumers."""
     if math.fsum(c * c for c in value) <= 1e-24:
-        raise ValueError(f"{field_name} must be a non-zero vector")
+        raise InputError(f"{field_name} must be a non-zero vector")
     return value
 
 
 def _check_affine_matrix(matrix: list[list[float]], field_name: str) -> list[list[float]]:
     """A 4x4 row-major matrix acting on column vectors; it must be affine and invertible."""
     if any(abs(a - b) > 1e-12 for a, b in zip(matrix[3], (0.0, 0.0, 0.0, 1.0), strict=True)):
-        raise ValueError(f"{field_name} last row must be [0, 0, 0, 1] (affine transform)")
+        raise InputError(f"{field_name} last row must be [0, 0, 0, 1] (affine transform)")
     (a, b, c), (d, e, f), (g, h, i) = (row[:3] for row in matrix[:3])
     determinant = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
     if abs(determinant) < 1e-18:
-        raise ValueError(f"{field_name} is singular (determinant {determinant:g})")
+        raise InputError(f"{field_name} is singular (determinant {determinant:g})")
     return matrix
 
 
@@ -132,13 +134,13 @@ class TabulatedSpectrum(StrictModel):
     @classmethod
     def _increasing(cls, wavelengths_nm: list[float]) -> list[float]:
         if any(b <= a for a, b in itertools.pairwise(wavelengths_nm)):
-            raise ValueError("wavelengths_nm must be strictly increasing")
+            raise InputError("wavelengths_nm must be strictly increasing")
         return wavelengths_nm
 
     @model_validator(mode="after")
     def _same_length(self) -> TabulatedSpectrum:
         if len(self.values) != len(self.wavelengths_nm):
-            raise ValueError(
+            raise InputError(
                 f"values has {len(self.values)} entries but wavelengths_nm has {len(self.wavelengths_nm)}"
             )
         return self
@@ -184,12 +186,12 @@ class Transform(StrictModel):
         uses_trs = any(getattr(self, name) is not None for name in trs_fields)
         if self.matrix is not None:
             if uses_trs:
-                raise ValueError("matrix cannot be combined with translate_m/rotate_axis/rotate_deg/scale")
+                raise InputError("matrix cannot be combined with translate_m/rotate_axis/rotate_deg/scale")
             _check_affine_matrix(self.matrix, "matrix")
         elif not uses_trs:
-            raise ValueError("transform needs matrix or at least one of translate_m, rotate_deg, scale")
+            raise InputError("transform needs matrix or at least one of translate_m, rotate_deg, scale")
         if (self.rotate_deg is None) != (self.rotate_axis is None):
-            raise ValueError("rotate_axis and rotate_deg must be given together")
+            raise InputError("rotate_axis and rotate_deg must be given together")
         if self.rotate_axis is not None:
             _check_direction(self.rotate_axis, "rotate_axis")
         return self
@@ -247,11 +249,11 @@ class PerspectiveCamera(StrictModel):
         has_look_at = self.origin_m is not None or self.target_m is not None
         if self.to_world is not None:
             if has_look_at:
-                raise ValueError("to_world cannot be combined with origin_m/target_m")
+                raise InputError("to_world cannot be combined with origin_m/target_m")
             _check_affine_matrix(self.to_world, "to_world")
         else:
             if self.origin_m is None or self.target_m is None:
-                raise ValueError("camera needs origin_m and target_m (or to_world)")
+                raise InputError("camera needs origin_m and target_m (or to_world)")
             view = [t - o for t, o in zip(self.target_m, self.origin_m, strict=True)]
             _check_direction(view, "target_m - origin_m")
             _check_direction(self.up, "up")
@@ -261,14 +263,14 @@ class PerspectiveCamera(StrictModel):
                 view[0] * self.up[1] - view[1] * self.up[0],
             ]
             if math.fsum(c * c for c in cross) <= 1e-18 * math.fsum(c * c for c in view):
-                raise ValueError("up must not be parallel to the viewing direction target_m - origin_m")
+                raise InputError("up must not be parallel to the viewing direction target_m - origin_m")
         has_lens = self.focal_length_mm is not None or self.sensor_width_mm is not None
         if has_lens and self.fov_deg is not None:
-            raise ValueError("give fov_deg or focal_length_mm + sensor_width_mm, not both")
+            raise InputError("give fov_deg or focal_length_mm + sensor_width_mm, not both")
         if has_lens and (self.focal_length_mm is None or self.sensor_width_mm is None):
-            raise ValueError("focal_length_mm and sensor_width_mm must be given together")
+            raise InputError("focal_length_mm and sensor_width_mm must be given together")
         if self.far_clip_m <= self.near_clip_m:
-            raise ValueError("far_clip_m must be greater than near_clip_m")
+            raise InputError("far_clip_m must be greater than near_clip_m")
         return self
 
     def horizontal_fov_deg(self) -> float:
@@ -300,7 +302,7 @@ class Film(StrictModel):
     @model_validator(mode="after")
     def _range(self) -> Film:
         if self.wavelength_max_nm <= self.wavelength_min_nm:
-            raise ValueError("wavelength_max_nm must be greater than wavelength_min_nm")
+            raise InputError("wavelength_max_nm must be greater than wavelength_min_nm")
         return self
 
 
@@ -317,7 +319,7 @@ class _EmitterBase(StrictModel):
     @model_validator(mode="after")
     def _one_intensity(self) -> _EmitterBase:
         if (self.power_w is None) == (self.radiance_scale is None):
-            raise ValueError("give exactly one of power_w (total radiant power, W) or radiance_scale")
+            raise InputError("give exactly one of power_w (total radiant power, W) or radiance_scale")
         return self
 
 
@@ -403,7 +405,7 @@ def _check_rectangle_frame(
     if math.fsum(c * c for c in cross) <= 1e-18 * math.fsum(c * c for c in up) * math.fsum(
         c * c for c in normal
     ):
-        raise ValueError(f"{up_name} must not be parallel to {normal_name}")
+        raise InputError(f"{up_name} must not be parallel to {normal_name}")
 
 
 Emitter = Annotated[
@@ -453,12 +455,12 @@ class MeshShape(_ShapeBase):
         vertex_count = len(self.vertices_m)
         for triangle_index, triangle in enumerate(self.indices):
             if max(triangle) >= vertex_count:
-                raise ValueError(
+                raise InputError(
                     f"indices[{triangle_index}] refers to vertex {max(triangle)} but there are "
                     f"{vertex_count} vertices"
                 )
         if self.normals is not None and len(self.normals) != vertex_count:
-            raise ValueError(
+            raise InputError(
                 f"normals has {len(self.normals)} entries, expected one per vertex ({vertex_count})"
             )
         return self
@@ -506,7 +508,7 @@ class ShellShape(_ShapeBase):
     def _frame(self) -> ShellShape:
         _check_rectangle_frame(self.axis, self.up, normal_name="axis")
         if self.rib_depth + self.segment_depth >= 0.5:
-            raise ValueError("rib_depth + segment_depth must be below 0.5 (the surface would fold)")
+            raise InputError("rib_depth + segment_depth must be below 0.5 (the surface would fold)")
         return self
 
 
@@ -551,7 +553,7 @@ class OpticalDiscShape(_ShapeBase):
     def _radii(self) -> OpticalDiscShape:
         _check_direction(self.normal, "normal")
         if self.inner_radius_m >= self.radius_m:
-            raise ValueError("inner_radius_m must be smaller than radius_m")
+            raise InputError("inner_radius_m must be smaller than radius_m")
         return self
 
 
@@ -574,7 +576,7 @@ class BackdropShape(_ShapeBase):
     def _frame(self) -> BackdropShape:
         _check_rectangle_frame(self.up, self.facing, normal_name="up", up_name="facing")
         if self.cove_radius_m >= self.height_m:
-            raise ValueError("cove_radius_m must be smaller than height_m")
+            raise InputError("cove_radius_m must be smaller than height_m")
         return self
 
 
@@ -586,15 +588,15 @@ PROCEDURAL_SHAPE_TYPES = (ShellShape, WavySheetShape, OpticalDiscShape, Backdrop
 def check_bundle_relative_path(path: str, suffixes: tuple[str, ...] | None = None) -> str:
     """Reject anything that could leave the bundle directory: absolute paths, ``..``, URLs, drives."""
     if "\\" in path or "\x00" in path:
-        raise ValueError("path must use '/' separators and no NUL characters")
+        raise InputError("path must use '/' separators and no NUL characters")
     if re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:", path):
-        raise ValueError(f"path must be relative to the bundle, not a URL or drive ({path!r})")
+        raise InputError(f"path must be relative to the bundle, not a URL or drive ({path!r})")
     if path.startswith("/"):
-        raise ValueError(f"path must be relative to the bundle, not absolute ({path!r})")
+        raise InputError(f"path must be relative to the bundle, not absolute ({path!r})")
     if any(part in ("..", "") for part in path.split("/")):
-        raise ValueError(f"path must stay inside the bundle (no '..' or empty components) ({path!r})")
+        raise InputError(f"path must stay inside the bundle (no '..' or empty components) ({path!r})")
     if suffixes is not None and not path.lower().endswith(suffixes):
-        raise ValueError(f"path must end with one of {', '.join(suffixes)} ({path!r})")
+        raise InputError(f"path must end with one of {', '.join(suffixes)} ({path!r})")
     return path
 
 
@@ -738,7 +740,7 @@ class GratingMaterial(_ScatteringMaterial):
             if self.pit_depth_nm is None:
                 self.pit_depth_nm = preset["pit_depth_nm"]
         if self.pitch_um is None:
-            raise ValueError("pitch_um is required when no preset is given")
+            raise InputError("pitch_um is required when no preset is given")
         if self.pit_depth_nm is None:
             self.pit_depth_nm = DEFAULT_PIT_DEPTH_NM
         return self

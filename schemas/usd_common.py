@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
+from hgcore.errors import InputError
+
 HG_NAMESPACE = "hg"
 #: Key of the root layer's ``customLayerData`` dictionary holding ``schema``, ``name`` and ``film``.
 LAYER_DATA_KEY = "hgrender"
@@ -95,7 +97,7 @@ def write_hg_attributes(prim: Usd.Prim, data: dict[str, Any], namespace: str = H
         elif isinstance(value, list) and all(isinstance(c, float) for c in value):
             prim.CreateAttribute(name, Sdf.ValueTypeNames.DoubleArray, custom=True).Set(Vt.DoubleArray(value))
         else:
-            raise ValueError(
+            raise InputError(
                 f"{name}: cannot store {type(value).__name__} value {value!r} as a USD attribute"
             )
 
@@ -129,10 +131,10 @@ def read_hg_attributes(prim: Usd.Prim, namespace: str = HG_NAMESPACE) -> dict[st
         for part in parts[:-1]:
             child = node.setdefault(part, {})
             if not isinstance(child, dict):
-                raise ValueError(f"{name}: conflicts with the attribute {namespace}:{part}")
+                raise InputError(f"{name}: conflicts with the attribute {namespace}:{part}")
             node = child
         if isinstance(node.get(parts[-1]), dict):
-            raise ValueError(f"{name}: conflicts with the namespace {name}:*")
+            raise InputError(f"{name}: conflicts with the namespace {name}:*")
         node[parts[-1]] = usd_value_to_python(value)
     return data
 
@@ -141,7 +143,7 @@ def stage_to_scene_matrix(stage: Usd.Stage) -> np.ndarray:
     """C (4x4, column-vector convention): stage coordinates → hgrender world (metres, +Y up)."""
     meters_per_unit = UsdGeom.GetStageMetersPerUnit(stage)
     if not (np.isfinite(meters_per_unit) and meters_per_unit > 0.0):
-        raise ValueError(f"metersPerUnit must be finite and > 0, got {meters_per_unit}")
+        raise InputError(f"metersPerUnit must be finite and > 0, got {meters_per_unit}")
     conversion = np.diag([meters_per_unit, meters_per_unit, meters_per_unit, 1.0])
     if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z:
         z_up_to_y_up = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils, Vt
 
+from hgcore.errors import InputError
 from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_scale, reflectance_rgb
 from schemas.procedural import generate_mesh
 from schemas.scene import (
@@ -316,7 +317,7 @@ def scene_to_usd(scene: Scene, path: str | os.PathLike[str]) -> Path:
     target = Path(path)
     suffix = target.suffix.lower()
     if suffix not in USD_SUFFIXES:
-        raise ValueError(f"path must end with one of {', '.join(USD_SUFFIXES)}, got {target.name!r}")
+        raise InputError(f"path must end with one of {', '.join(USD_SUFFIXES)}, got {target.name!r}")
     stage = Usd.Stage.CreateInMemory()
     build_stage(scene, stage)
     with tempfile.TemporaryDirectory(dir=target.parent, prefix=f".{target.name}.") as scratch:

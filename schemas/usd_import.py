@@ -47,9 +47,9 @@ import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdLux, UsdShade
 from pydantic import TypeAdapter, ValidationError
 
+from hgcore.settings import SceneLimits
 from schemas.bundle import check_usd_layers, extract_zip_bundle, is_inside
-from schemas.errors import SceneError, SceneProblem
-from schemas.limits import SceneLimits
+from schemas.errors import SceneError, SceneProblem, without_paths
 from schemas.mesh_files import fan_triangulate, load_scene_meshes
 from schemas.photometry import rgb_spectrum, tinted_spectrum
 from schemas.scene import SCHEMA_ID, Emitter, Material, PerspectiveCamera, Scene, Shape
@@ -516,7 +516,8 @@ def convert_stage(stage: Usd.Stage, limits: SceneLimits, default_name: str) -> d
         except SceneError as error:
             converter.problems.extend(error.problems)
         except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError, Tf.ErrorException) as error:
-            converter.problems.append({"pointer": _where(prim), "message": f"cannot convert: {error}"})
+            message = f"cannot convert: {without_paths(str(error))}"
+            converter.problems.append({"pointer": _where(prim), "message": message})
     if camera is None:
         converter.problems.append({"pointer": "<stage>", "message": "the stage has no UsdGeom.Camera"})
     if not emitters:
@@ -550,7 +551,8 @@ def import_usd(path: str | os.PathLike[str], bundle_dir: str | os.PathLike[str] 
     try:
         stage = Usd.Stage.Open(layers[0], Usd.Stage.LoadAll)
     except Tf.ErrorException as error:
-        raise SceneError.at(f"bundle:{root_file.name}", f"cannot compose the stage: {error}") from None
+        message = f"cannot compose the stage: {without_paths(str(error))}"
+        raise SceneError.at(f"bundle:{root_file.name}", message) from None
     scene = validate_scene(convert_stage(stage, limits, root_file.stem), limits)
     load_scene_meshes(scene, bundle, limits)  # mesh files must exist, parse and fit the triangle budget
     return scene
@@ -610,7 +612,8 @@ def import_usd_isolated(
         return validate_scene(payload["scene"], limits)
     if completed.returncode == EXIT_SCENE_ERROR and payload.get("problems"):
         raise SceneError(payload["problems"])
-    stderr_tail = completed.stderr.decode("utf-8", errors="replace").strip().splitlines()[-1:] or [""]
+    stderr = without_paths(completed.stderr.decode("utf-8", errors="replace"))
+    stderr_tail = stderr.strip().splitlines()[-1:] or [""]
     if completed.returncode < 0:
         signal_name = signal.Signals(-completed.returncode).name
         raise SceneError.at(where, f"the USD parser crashed ({signal_name}) {stderr_tail[0][:200]}".strip())

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 from pydantic import ValidationError
 
+from hgcore.settings import SceneLimits
 from schemas.errors import SceneError, SceneProblem, json_pointer
-from schemas.limits import SceneLimits
 from schemas.procedural import mesh_size
 from schemas.scene import PROCEDURAL_SHAPE_TYPES, MeshShape, Scene
 
@@ -52,6 +53,22 @@ def problems_from_validation_error(data: Any, error: ValidationError) -> list[Sc
     return problems
 
 
+MAX_REPORTED_PROBLEMS = 100
+"""A response lists at most this many problems (a document of a million bad numbers gets the first 100)."""
+
+#: Film fields with a deployment limit: field → (SceneLimits attribute, environment variable).
+FILM_LIMITS: dict[str, tuple[str, str]] = {
+    "width": ("max_resolution", "HGRENDER_MAX_RESOLUTION"),
+    "height": ("max_resolution", "HGRENDER_MAX_RESOLUTION"),
+    "spp": ("max_spp", "HGRENDER_MAX_SPP"),
+    "bands": ("max_bands", "HGRENDER_MAX_BANDS"),
+}
+
+#: Numeric arrays of meshes: bounded by the vertex and triangle limits, so the walk does not descend.
+_NUMERIC_ARRAYS = frozenset({"vertices_m", "indices", "normals", "matrix", "to_world"})
+_TABULATED_ARRAYS = ("wavelengths_nm", "values")
+
+
 def _limit_problem(pointer: str, what: str, value: int, limit: int, variable: str) -> list[SceneProblem]:
     """One problem when ``value`` exceeds ``limit`` (named by its environment variable), else none."""
     if value <= limit:
@@ -59,42 +76,165 @@ def _limit_problem(pointer: str, what: str, value: int, limit: int, variable: st
     return [{"pointer": pointer, "message": f"{what} {value} exceeds the limit of {limit} ({variable})"}]
 
 
-def check_limits(scene: Scene, limits: SceneLimits) -> list[SceneProblem]:
-    """Problems where a structurally valid scene exceeds the deployment's resource limits."""
-    film = scene.film
-    meshes = [shape for shape in scene.shapes if isinstance(shape, MeshShape)]
-    procedural = [mesh_size(shape) for shape in scene.shapes if isinstance(shape, PROCEDURAL_SHAPE_TYPES)]
-    return [
-        *_limit_problem("/film/width", "width", film.width, limits.max_resolution, "HGRENDER_MAX_RESOLUTION"),
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _list(document: dict[str, Any], key: str) -> list[Any]:
+    value = document.get(key)
+    return value if isinstance(value, list) else []
+
+
+def _mesh_totals(shapes: list[Any]) -> tuple[int, int]:
+    """(vertices, triangles) over the inline meshes of a raw shape list."""
+    meshes = [s for s in shapes if isinstance(s, dict) and s.get("type") == "mesh"]
+    return sum(len(_list(m, "vertices_m")) for m in meshes), sum(len(_list(m, "indices")) for m in meshes)
+
+
+def _string_and_table_problems(data: Any, limits: SceneLimits) -> list[SceneProblem]:
+    """Strings and object keys longer than ``max_string_chars`` and tabulated spectra longer than
+    ``max_spectrum_samples``, anywhere in the document (one iterative walk; the oversized text itself is
+    never echoed)."""
+    problems: list[SceneProblem] = []
+    max_chars, max_samples = limits.max_string_chars, limits.max_spectrum_samples
+    stack: list[tuple[Any, list[str | int]]] = [(data, [])]
+    while stack and len(problems) < MAX_REPORTED_PROBLEMS:
+        node, parts = stack.pop()
+        if isinstance(node, str) and len(node) > max_chars:
+            problems.append(
+                {
+                    "pointer": json_pointer(parts),
+                    "message": f"string of {len(node)} characters exceeds the limit of {max_chars} "
+                    "(HGRENDER_MAX_STRING_CHARS)",
+                }
+            )
+        elif isinstance(node, dict):
+            tabulated = node.get("type") == "tabulated"
+            for key, value in node.items():
+                if len(key) > max_chars:
+                    problems.append(
+                        {
+                            "pointer": json_pointer(parts),
+                            "message": f"object key of {len(key)} characters exceeds the limit of "
+                            f"{max_chars} (HGRENDER_MAX_STRING_CHARS)",
+                        }
+                    )
+                    continue
+                if tabulated and key in _TABULATED_ARRAYS and isinstance(value, list):
+                    problems += _limit_problem(
+                        json_pointer([*parts, key]),
+                        "spectrum samples",
+                        len(value),
+                        max_samples,
+                        "HGRENDER_MAX_SPECTRUM_SAMPLES",
+                    )
+                    continue
+                if key not in _NUMERIC_ARRAYS:
+                    stack.append((value, [*parts, key]))
+        elif isinstance(node, list):
+            stack.extend((item, [*parts, index]) for index, item in enumerate(node))
+    return problems
+
+
+def check_document_limits(data: dict[str, Any], limits: SceneLimits) -> list[SceneProblem]:
+    """Problems where a raw (not yet validated) scene document exceeds the deployment's collection
+    limits: checked before the schema, so that validating or rendering it never costs more than the
+    limits allow. Values of the wrong type are left to the schema."""
+    materials = data.get("materials")
+    shapes, emitters = _list(data, "shapes"), _list(data, "emitters")
+    vertices, triangles = _mesh_totals(shapes)
+    problems = [
         *_limit_problem(
-            "/film/height", "height", film.height, limits.max_resolution, "HGRENDER_MAX_RESOLUTION"
+            "/materials",
+            "material count",
+            len(materials) if isinstance(materials, dict) else 0,
+            limits.max_materials,
+            "HGRENDER_MAX_MATERIALS",
         ),
         *_limit_problem(
-            "/film", "pixel count", film.width * film.height, limits.max_pixels, "HGRENDER_MAX_PIXELS"
+            "/emitters", "emitter count", len(emitters), limits.max_emitters, "HGRENDER_MAX_EMITTERS"
         ),
-        *_limit_problem("/film/spp", "spp", film.spp, limits.max_spp, "HGRENDER_MAX_SPP"),
-        *_limit_problem("/film/bands", "bands", film.bands, limits.max_bands, "HGRENDER_MAX_BANDS"),
         *_limit_problem(
             "/shapes",
             "shape + emitter count",
-            len(scene.shapes) + len(scene.emitters),
+            len(shapes) + len(emitters),
             limits.max_primitives,
             "HGRENDER_MAX_PRIMITIVES",
         ),
         *_limit_problem(
-            "/shapes",
-            "triangle count",
-            sum(len(mesh.indices) for mesh in meshes) + sum(triangles for _, triangles in procedural),
-            limits.max_triangles,
-            "HGRENDER_MAX_TRIANGLES",
+            "/shapes", "triangle count", triangles, limits.max_triangles, "HGRENDER_MAX_TRIANGLES"
         ),
+        *_limit_problem("/shapes", "vertex count", vertices, limits.max_vertices, "HGRENDER_MAX_VERTICES"),
+    ]
+    return problems or _string_and_table_problems(data, limits)
+
+
+def check_limits(scene: Scene, limits: SceneLimits) -> list[SceneProblem]:
+    """Problems where a validated scene's film exceeds the deployment's limits (defaults included)."""
+    film = scene.film
+    problems = [
+        problem
+        for name, (attribute, variable) in FILM_LIMITS.items()
+        for problem in _limit_problem(
+            f"/film/{name}", name, getattr(film, name), getattr(limits, attribute), variable
+        )
+    ]
+    problems += _limit_problem(
+        "/film", "pixel count", film.width * film.height, limits.max_pixels, "HGRENDER_MAX_PIXELS"
+    )
+    # Procedural shapes' triangles come from their (validated, capped) parameters: counted here, with
+    # the inline meshes' again so that the total is what the renderer will hold.
+    procedural = [mesh_size(shape) for shape in scene.shapes if isinstance(shape, PROCEDURAL_SHAPE_TYPES)]
+    if not procedural:
+        return problems
+    inline = [shape for shape in scene.shapes if isinstance(shape, MeshShape)]
+    vertices = sum(len(mesh.vertices_m) for mesh in inline) + sum(v for v, _ in procedural)
+    triangles = sum(len(mesh.indices) for mesh in inline) + sum(t for _, t in procedural)
+    return [
+        *problems,
         *_limit_problem(
-            "/shapes",
-            "vertex count",
-            sum(len(mesh.vertices_m) for mesh in meshes) + sum(vertices for vertices, _ in procedural),
-            limits.max_vertices,
-            "HGRENDER_MAX_VERTICES",
+            "/shapes", "triangle count", triangles, limits.max_triangles, "HGRENDER_MAX_TRIANGLES"
         ),
+        *_limit_problem("/shapes", "vertex count", vertices, limits.max_vertices, "HGRENDER_MAX_VERTICES"),
+    ]
+
+
+def _in_document(data: Any, pointer: str) -> Any:
+    """The value at a simple JSON pointer (no escapes needed for the fields it is used on), or None."""
+    node = data
+    for part in pointer.split("/")[1:]:
+        if isinstance(node, dict):
+            node = node.get(part)
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        else:
+            return None
+    return node
+
+
+def _explain(data: Any, problem: SceneProblem, limits: SceneLimits) -> SceneProblem:
+    """Say what is wrong in the deployment's terms: a film value above its configured limit names that
+    limit (not the schema's hard cap), and NaN or infinity is called what it is."""
+    value = _in_document(data, problem["pointer"])
+    if isinstance(value, float) and not math.isfinite(value):
+        return {"pointer": problem["pointer"], "message": f"{value} is not a finite number"}
+    name = problem["pointer"].removeprefix("/film/")
+    if problem["pointer"].startswith("/film/") and name in FILM_LIMITS and _is_number(value):
+        attribute, variable = FILM_LIMITS[name]
+        limit = getattr(limits, attribute)
+        if value > limit:
+            return _limit_problem(problem["pointer"], name, value, limit, variable)[0]
+    return problem
+
+
+def _bounded(problems: list[SceneProblem]) -> list[SceneProblem]:
+    """At most ``MAX_REPORTED_PROBLEMS`` problems, the last one saying how many were left out."""
+    if len(problems) <= MAX_REPORTED_PROBLEMS:
+        return problems
+    left_out = len(problems) - MAX_REPORTED_PROBLEMS + 1
+    return [
+        *problems[: MAX_REPORTED_PROBLEMS - 1],
+        {"pointer": "", "message": f"and {left_out} more problems"},
     ]
 
 
@@ -106,10 +246,14 @@ def validate_scene(data: Any, limits: SceneLimits | None = None) -> Scene:
     limits = limits if limits is not None else SceneLimits()
     if not isinstance(data, dict):
         raise SceneError.at("", f"a scene must be a JSON object, got {type(data).__name__}")
+    problems = check_document_limits(data, limits)
+    if problems:
+        raise SceneError(_bounded(problems))
     try:
         scene = Scene.model_validate(data)
     except ValidationError as error:
-        raise SceneError(problems_from_validation_error(data, error)) from None
+        problems = [_explain(data, p, limits) for p in problems_from_validation_error(data, error)]
+        raise SceneError(_bounded(problems)) from None
     except (ValueError, TypeError, RecursionError) as error:
         # Defensive: anything pydantic itself could not locate still becomes a located SceneError.
         raise SceneError.at("", f"invalid scene: {error}") from None

@@ -18,6 +18,8 @@ from pathlib import Path
 import redis
 import redis.asyncio as aioredis
 
+from hgcore.errors import InputError
+
 SCOPES: tuple[str, ...] = ("submit", "read", "admin")
 TOKEN_PREFIX = "hgr_"
 _TOKEN_KEY = "hgrender:token:{}"
@@ -87,7 +89,7 @@ def hash_token(token: str) -> str:
 def validate_scopes(scopes: list[str] | tuple[str, ...]) -> tuple[str, ...]:
     unknown = sorted(set(scopes) - set(SCOPES))
     if unknown or not scopes:
-        raise ValueError(f"scopes: must be a non-empty subset of {list(SCOPES)}; unknown: {unknown}")
+        raise InputError(f"scopes: must be a non-empty subset of {list(SCOPES)}; unknown: {unknown}")
     return tuple(s for s in SCOPES if s in scopes)
 
 
@@ -100,7 +102,7 @@ class TokenRegistry:
     def register(self, token: str, owner: str, scopes: tuple[str, ...], name: str = "") -> TokenInfo:
         """Store the hash of an existing secret ``token`` (used for the admin token file)."""
         if not owner or len(owner) > 128:
-            raise ValueError("owner: must be 1 to 128 characters")
+            raise InputError("owner: must be 1 to 128 characters")
         token_hash = hash_token(token)
         info = TokenInfo(token_hash[:12], owner, validate_scopes(scopes), name, time.time())
         mapping = {

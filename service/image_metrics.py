@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from hgcore.colour import D65_WHITE_XYZ, XYZ_TO_LINEAR_SRGB, ciede2000, radiance_xyz, xyz_to_lab
+from hgcore.errors import InputError
 from hgcore.imaging import srgb_encode
 
 EXPOSURE_PERCENTILE = 99.0
@@ -43,7 +44,7 @@ def metric_exposure_ev(bands: np.ndarray, band_centers_nm: np.ndarray) -> float:
 
 def _exposed_xyz(bands: np.ndarray, band_centers_nm: np.ndarray, exposure_ev: float) -> np.ndarray:
     if not math.isfinite(exposure_ev):
-        raise ValueError(f"ev: must be finite, got {exposure_ev}")
+        raise InputError(f"ev: must be finite, got {exposure_ev}")
     return radiance_xyz(bands, band_centers_nm) * 2.0**exposure_ev
 
 
@@ -90,12 +91,12 @@ def perceptual_map(
 ) -> np.ndarray:
     """``de2000`` or ``flip`` per-pixel map (H, W) of two band images of the same layout."""
     if reference.shape != sample.shape:
-        raise ValueError(f"b: image is {sample.shape}, a is {reference.shape}; compare needs equal layouts")
+        raise InputError(f"b: image is {sample.shape}, a is {reference.shape}; compare needs equal layouts")
     if metric == "de2000":
         return delta_e00_map(reference, sample, band_centers_nm, exposure_ev)
     if metric == "flip":
         return flip_map(reference, sample, band_centers_nm, exposure_ev)
-    raise ValueError(f"mode: must be one of {', '.join(PERCEPTUAL_METRICS)}, got {metric!r}")
+    raise InputError(f"mode: must be one of {', '.join(PERCEPTUAL_METRICS)}, got {metric!r}")
 
 
 def map_statistics(values: np.ndarray) -> dict[str, float]:

@@ -23,6 +23,7 @@ from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
 from hgcore.artifacts.keys import input_key, job_prefix
+from hgcore.errors import InputError
 from hgcore.jobs.keys import (
     JOBS_BY_STATE,
     JOBS_INDEX,
@@ -40,6 +41,7 @@ from hgcore.settings import Settings
 from hgcore.store.base import ArtifactStore
 
 _IDEMPOTENCY_WAIT_S = 2.0
+_RQ_ENDED = frozenset({RQJobStatus.FINISHED, RQJobStatus.FAILED, RQJobStatus.STOPPED, RQJobStatus.CANCELED})
 
 
 class JobConflictError(Exception):
@@ -67,7 +69,7 @@ class JobService(JobRecords):
         """Number of chunks for a request: the request's, else the default, never more than spp."""
         chunk_count = chunks if chunks is not None else self.settings.default_chunks
         if chunk_count > self.settings.max_chunks:
-            raise ValueError(f"chunks: {chunk_count} exceeds the limit of {self.settings.max_chunks}")
+            raise InputError(f"chunks: {chunk_count} exceeds the limit of {self.settings.max_chunks}")
         return min(chunk_count, spp)  # every chunk needs at least one sample per pixel
 
     def create(
@@ -88,7 +90,7 @@ class JobService(JobRecords):
         ``extra_files`` (relative names → bytes) are stored next to the scene (textures of a USD bundle).
         """
         if priority not in PRIORITY_QUEUES:
-            raise ValueError(f"priority: must be one of {list(PRIORITY_QUEUES)}")
+            raise InputError(f"priority: must be one of {list(PRIORITY_QUEUES)}")
         spp = int(scene["film"]["spp"])
         base_seed = int(scene["film"].get("seed", 0))
         chunk_count = self.plan(spp, chunks)
@@ -232,9 +234,23 @@ class JobService(JobRecords):
             raise JobConflictError(f"status: job is already {current.status.value}")
         for rq_id in rq_ids(job_id, view.chunks_total):
             self._stop_rq_job(rq_id)
+        self._mark_unfinished_chunks_canceled(job_id, view.chunks_total)
         current = self.get(job_id)
         assert current is not None
         return current
+
+    def _mark_unfinished_chunks_canceled(self, job_id: str, chunk_count: int) -> None:
+        """Chunks (and the merge step) that had not finished read ``canceled``, not ``running`` or
+        ``queued`` forever: their RQ jobs were dropped or stopped above."""
+        fields = self.chunk_fields(job_id)
+        steps = [*(str(i) for i in range(chunk_count)), "merge"]
+        unfinished = {
+            f"{step}.status": "canceled"
+            for step in steps
+            if fields.get(f"{step}.status", "queued" if step != "merge" else "") in {"queued", "running"}
+        }
+        if unfinished:
+            self.client.hset(chunks_key(job_id), mapping=unfinished)
 
     def _stop_rq_job(self, rq_id: str) -> None:
         try:

@@ -14,10 +14,10 @@ from fastapi import FastAPI
 from fastapi_offline import FastAPIOffline
 
 from hgcore import __version__
+from hgcore.errors import InputError
 from hgcore.redis_clients import async_redis_client, redis_client
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
-from schemas import SceneLimits
 from service.api.errors import install_exception_handlers
 from service.api.middleware import BodySizeLimitMiddleware, LatencyMiddleware
 from service.api.openapi import install_openapi
@@ -40,7 +40,7 @@ request. Interactive pages: `/docs` (Swagger UI) and `/redoc`, served from this 
 def create_app(settings: Settings) -> FastAPI:
     """The API for ``settings``; ``settings.redis_url`` must name a running Redis."""
     if not settings.redis_url:
-        raise ValueError("redis_url: REDIS_URL must be set (hgrender serve starts a private Redis)")
+        raise InputError("redis_url: REDIS_URL must be set (hgrender serve starts a private Redis)")
     latency = LatencyHistogram()
 
     @asynccontextmanager
@@ -75,7 +75,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.jobs = JobService(client, store, settings, aclient=app.state.aredis)
     app.state.tokens = TokenRegistry(client)
     app.state.authenticator = RequestAuthenticator(app.state.aredis, settings.rate_limit_per_minute)
-    app.state.scene_limits = SceneLimits()
+    app.state.scene_limits = settings  # Settings extends SceneLimits: one read of the environment
     app.state.latency = latency
 
     install_exception_handlers(app)

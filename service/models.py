@@ -15,9 +15,12 @@ from hgcore.jobs.views import JobView
 
 
 class JobOptions(BaseModel):
-    """Everything of a job request except the scene (shared by the JSON and multipart forms)."""
+    """Everything of a job request except the scene (shared by the JSON and multipart forms).
 
-    model_config = ConfigDict(extra="forbid")
+    Strict like the scene: ``"spp": "100"`` is an error in a JSON body. Multipart form fields are text by
+    nature, so the form route validates them with ``strict=False``."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     priority: Priority = Field("normal", description="Queue: `high`, `normal` or `low`.")
     spp: int | None = Field(None, ge=1, description="Samples per pixel; default: the scene's own.")
@@ -79,6 +82,7 @@ class JobCreate(JobOptions):
 
     model_config = ConfigDict(
         extra="forbid",
+        strict=True,
         json_schema_extra={
             "examples": [
                 {

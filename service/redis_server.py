@@ -1,13 +1,21 @@
 """A private ``redis-server`` subprocess for the embedded deployment (``hgrender serve`` without REDIS_URL).
 
-Persistence is on (append-only file, fsync every second, plus RDB snapshots) under ``<data_dir>/redis`` so
-job records and queued chunks survive a restart. The server listens on loopback only, on a free port
-chosen at start, and the start returns once the server answers PING.
+Persistence is on (append-only file plus RDB snapshots) under ``<data_dir>/redis`` so job records and
+queued chunks survive a restart. The AOF is fsynced before every reply (``appendfsync always``): what a
+worker or the API saw acknowledged survives a SIGKILL of the server, so a restart never resumes from a
+state up to a second older than what the workers already acted on (a chunk marked done whose completion
+the server forgot, a dequeued chunk that is back in no queue). It costs one fsync per write batch, which
+the service's write rate (a few per chunk and per progress event) affords. The server listens on
+loopback only, on a port chosen free at the first start and kept across restarts (clients reconnect to
+the same URL), and ``start`` returns once the server answers PING.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import time
@@ -15,6 +23,7 @@ from pathlib import Path
 
 import redis
 
+from hgcore.errors import InputError
 from hgcore.redis_clients import redis_client
 
 
@@ -23,6 +32,34 @@ def free_loopback_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
+
+
+def servers_working_in(directory: Path) -> list[int]:
+    """PIDs of the redis-server processes whose working directory is ``directory`` (Redis changes into
+    its ``--dir``); Linux ``/proc``."""
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if (
+                proc.name.isdigit()
+                and (proc / "comm").read_text().strip() == "redis-server"
+                and Path(os.readlink(proc / "cwd")) == directory.resolve()
+            ):
+                pids.append(int(proc.name))
+        except OSError:  # ended meanwhile, or not ours to inspect
+            continue
+    return pids
+
+
+def _stop_pid(pid: int, timeout_s: float) -> None:
+    """SIGTERM ``pid`` (Redis flushes its AOF and exits), SIGKILL after ``timeout_s``."""
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(pid, signal.SIGTERM)
+        deadline = time.monotonic() + timeout_s
+        while Path(f"/proc/{pid}").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if Path(f"/proc/{pid}").exists():
+            os.kill(pid, signal.SIGKILL)
 
 
 class RedisServer:
@@ -42,7 +79,7 @@ class RedisServer:
         """The command line: loopback only, AOF on, data and log under ``data_dir``."""
         binary = shutil.which(self.executable)
         if binary is None:
-            raise ValueError(
+            raise InputError(
                 f"executable: {self.executable!r} not found on PATH (Debian: apt install redis-server)"
             )
         return [
@@ -51,7 +88,7 @@ class RedisServer:
             "--port", str(self.port),
             "--dir", str(self.data_dir.resolve()),
             "--appendonly", "yes",
-            "--appendfsync", "everysec",
+            "--appendfsync", "always",
             "--save", "60 1",
             "--daemonize", "no",
             "--protected-mode", "yes",
@@ -59,8 +96,12 @@ class RedisServer:
         ]  # fmt: skip
 
     def start(self, timeout_s: float = 10.0) -> RedisServer:
-        """Start the server and wait until it answers PING; raises RuntimeError if it does not."""
+        """Start the server and wait until it answers PING; raises RuntimeError if it does not. A
+        redis-server still running on this data dir (left by a ``serve`` that was SIGKILLed) is stopped
+        first: two servers must never append to one AOF."""
         self.data_dir.mkdir(parents=True, exist_ok=True)
+        for pid in servers_working_in(self.data_dir):
+            _stop_pid(pid, timeout_s)
         self.process = subprocess.Popen(self.command(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         deadline = time.monotonic() + timeout_s
         client = redis_client(self.url, socket_connect_timeout=0.5)

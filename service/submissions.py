@@ -1,7 +1,7 @@
 """Turning a job request into a validated scene document: JSON bodies, uploaded JSON files, USD files.
 
 The request's ``spp`` and ``seed`` override the scene's ``film.spp`` / ``film.seed`` and the result is
-validated again, so the deployment's scene limits (``schemas.limits.SceneLimits``) apply to the values
+validated again, so the deployment's scene limits (``hgcore.settings.SceneLimits``) apply to the values
 that will actually be rendered. Invalid input raises ``schemas.SceneError`` (JSON pointers into the scene)
 or ValueError; nothing is written or enqueued before this succeeds.
 """
@@ -12,7 +12,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from schemas import SceneError, SceneLimits, validate_scene, validate_scene_json
+from hgcore.settings import SceneLimits
+from schemas import SceneError, validate_scene, validate_scene_json
 from service.models import JobOptions
 
 USD_SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd", ".usdz", ".zip")

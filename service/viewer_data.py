@@ -48,6 +48,7 @@ from hgcore.artifacts.layout import (
 )
 from hgcore.artifacts.pixel_sums import PixelSums, read_partial
 from hgcore.colour import XYZ_TO_LINEAR_SRGB, radiance_xyz
+from hgcore.errors import InputError
 from hgcore.imaging import REC709_LUMINANCE, auto_exposure_ev, display_rgb8
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 from service.image_metrics import PERCEPTUAL_METRICS, metric_exposure_ev, perceptual_map
@@ -151,7 +152,7 @@ class DecodedImage:
         if name == RGB_LAYER:
             return self.rgb
         if name not in self.channels:
-            raise ValueError(f"name: no layer {name!r} (see GET /v1/jobs/{{id}}/layers)")
+            raise InputError(f"name: no layer {name!r} (see GET /v1/jobs/{{id}}/layers)")
         return self.channels[name]
 
     def layers(self) -> list[LayerInfo]:
@@ -196,17 +197,17 @@ def decode_uploaded_exr(data: bytes) -> DecodedImage:
     ``S0.<λ>nm`` band; linear sRGB ``R``, ``G``, ``B`` are computed from the bands when absent. ValueError
     ("file: ...") otherwise, which the API answers with 422."""
     if not data.startswith(EXR_MAGIC):
-        raise ValueError("file: not an OpenEXR file (its first bytes are not the EXR magic number)")
+        raise InputError("file: not an OpenEXR file (its first bytes are not the EXR magic number)")
     with tempfile.TemporaryDirectory(prefix="hgrender-upload-") as directory:
         path = Path(directory) / "upload.exr"
         path.write_bytes(data)
         try:
             image = decode_exr(path)
         except ArtifactFormatError as error:
-            raise ValueError(f"file: cannot decode the EXR: {error}") from None
+            raise InputError(f"file: cannot decode the EXR: {error}") from None
     if len(image.band_names) < 2:
         names = ", ".join(sorted(image.channels)[:8])
-        raise ValueError(
+        raise InputError(
             "file: needs at least 2 spectral channels S0.<wavelength>nm (e.g. S0.550,000000nm); "
             f"the file has {names}"
         )
@@ -224,7 +225,7 @@ class UploadedImages:
 
     def __init__(self, max_images: int = 4) -> None:
         if max_images < 1:
-            raise ValueError(f"max_images: must be at least 1, got {max_images}")
+            raise InputError(f"max_images: must be at least 1, got {max_images}")
         self.max_images = max_images
         self._images: OrderedDict[str, tuple[str, DecodedImage]] = OrderedDict()
         self._lock = threading.Lock()
@@ -283,7 +284,7 @@ class DecodedImageCache:
 
     def __init__(self, store: ArtifactStore, max_images: int = 8) -> None:
         if max_images < 1:
-            raise ValueError(f"max_images: must be at least 1, got {max_images}")
+            raise InputError(f"max_images: must be at least 1, got {max_images}")
         self.store = store
         self.max_images = max_images
         self._images: OrderedDict[tuple[str, int], DecodedImage] = OrderedDict()
@@ -296,20 +297,13 @@ class DecodedImageCache:
         if not listed:
             raise ArtifactNotFoundError(IMAGE_EXR)
         cache_key = (job_id, listed[0].size_bytes)
-        with self._lock:
-            if cache_key in self._images:
-                self._images.move_to_end(cache_key)
-                return self._images[cache_key]
+        cached = self._cached(cache_key)
+        if cached is not None:
+            return cached
         with tempfile.TemporaryDirectory(prefix="hgrender-viewer-") as directory:
             path = Path(directory) / IMAGE_EXR
             self.store.get_file(key, path)
-            image = decode_exr(path)
-        with self._lock:
-            self._images[cache_key] = image
-            self._images.move_to_end(cache_key)
-            while len(self._images) > self.max_images:
-                self._images.popitem(last=False)
-        return image
+            return self._keep(cache_key, decode_exr(path))
 
     def get_partial(self, job_id: str, film: dict[str, Any]) -> DecodedImage:
         """A running job's preview from its finished chunk partials; ArtifactNotFoundError when none."""
@@ -321,17 +315,26 @@ class DecodedImageCache:
         if not listed:
             raise ArtifactNotFoundError("chunks")
         cache_key = (job_id, hash(tuple((info.key, info.size_bytes) for info in listed)))
-        with self._lock:
-            if cache_key in self._images:
-                self._images.move_to_end(cache_key)
-                return self._images[cache_key]
+        cached = self._cached(cache_key)
+        if cached is not None:
+            return cached
         with tempfile.TemporaryDirectory(prefix="hgrender-viewer-") as directory:
             paths = []
             for index, info in enumerate(listed):
-                path = Path(directory) / f"{index}.npz"
+                path = Path(directory) / f"{index}{CHUNK_PARTIAL_SUFFIX}"
                 self.store.get_file(info.key, path)
                 paths.append(path)
-            image = merge_partials(paths, film)
+            return self._keep(cache_key, merge_partials(paths, film))
+
+    def _cached(self, cache_key: tuple[str, int]) -> DecodedImage | None:
+        with self._lock:
+            if cache_key not in self._images:
+                return None
+            self._images.move_to_end(cache_key)
+            return self._images[cache_key]
+
+    def _keep(self, cache_key: tuple[str, int], image: DecodedImage) -> DecodedImage:
+        """Cache ``image`` as the most recent, dropping the least recently used beyond ``max_images``."""
         with self._lock:
             self._images[cache_key] = image
             self._images.move_to_end(cache_key)
@@ -348,7 +351,7 @@ class DecodedImageCache:
 
 def _check_step(step: int) -> None:
     if not 1 <= step <= 64:
-        raise ValueError(f"step: must be between 1 and 64, got {step}")
+        raise InputError(f"step: must be between 1 and 64, got {step}")
 
 
 def downsample(values: np.ndarray, step: int, average: bool) -> np.ndarray:
@@ -377,16 +380,16 @@ def layer_array(image: DecodedImage, name: str, step: int = 1) -> np.ndarray:
 def encode_array(values: np.ndarray, dtype: Literal["f16", "f32"]) -> bytes:
     """Little-endian raw bytes, row-major, channels interleaved."""
     if dtype not in ("f16", "f32"):
-        raise ValueError(f"format: must be f16 or f32, got {dtype!r}")
+        raise InputError(f"format: must be f16 or f32, got {dtype!r}")
     return np.ascontiguousarray(values, dtype="<f2" if dtype == "f16" else "<f4").tobytes()
 
 
 def pixel_record(image: DecodedImage, x: int, y: int) -> dict[str, object]:
     """Everything known about pixel (x, y): spectrum, linear RGB, coherence values, depth/normal/albedo."""
     if not 0 <= x < image.width:
-        raise ValueError(f"x: must be in [0, {image.width - 1}], got {x}")
+        raise InputError(f"x: must be in [0, {image.width - 1}], got {x}")
     if not 0 <= y < image.height:
-        raise ValueError(f"y: must be in [0, {image.height - 1}], got {y}")
+        raise InputError(f"y: must be in [0, {image.height - 1}], got {y}")
 
     def value(name: str) -> float | None:
         channel = image.channels.get(name)
@@ -426,7 +429,7 @@ def diagnostics_exr(image: DecodedImage) -> bytes:
     float32 OpenEXR file, channel names as in ``image.exr``; ValueError when the image has none."""
     names = sorted(n for n in image.channels if n.startswith(COHERENCE_PREFIX))
     if not names:
-        raise ValueError("name: this image has no coherence diagnostics")
+        raise InputError("name: this image has no coherence diagnostics")
     with tempfile.TemporaryDirectory(prefix="hgrender-diagnostics-") as directory:
         path = Path(directory) / "diagnostics.exr"
         write_exr(path, [(name, image.channels[name]) for name in names], {})
@@ -438,7 +441,7 @@ def ellipse_grid(image: DecodedImage, spacing_px: int) -> list[dict[str, float]]
     (x = y = spacing/2 + i·spacing, rounded down), with that pixel's ℓ₁, ℓ₂ (µm), angle (rad) and area
     (µm²). The ellipse's ℓ₁ axis points along (cos angle, sin angle) with image +y up."""
     if not 2 <= spacing_px <= 4096:
-        raise ValueError(f"spacing: must be between 2 and 4096 pixels, got {spacing_px}")
+        raise InputError(f"spacing: must be between 2 and 4096 pixels, got {spacing_px}")
     covered = image.covered
     grid = []
     for y in range(spacing_px // 2, image.height, spacing_px):
@@ -472,7 +475,7 @@ def difference_map(
       (default: the reference's automatic exposure), by ``service.image_metrics`` as regression runs do.
     """
     if (reference.width, reference.height) != (sample.width, sample.height):
-        raise ValueError(
+        raise InputError(
             f"b: image is {sample.width}x{sample.height}, a is {reference.width}x{reference.height};"
             " compare needs equal sizes"
         )
@@ -484,12 +487,12 @@ def difference_map(
         result = np.mean(np.abs(rgb_b - rgb_a) / np.maximum(np.abs(rgb_a), floor), axis=-1)
     elif mode in PERCEPTUAL_METRICS:
         if reference.wavelengths_nm != sample.wavelengths_nm:
-            raise ValueError("b: its bands differ from a's; compare needs the same spectral layout")
+            raise InputError("b: its bands differ from a's; compare needs the same spectral layout")
         if len(reference.band_names) < 2:
-            raise ValueError(f"mode: {mode} needs at least 2 spectral bands (colour); a has one")
+            raise InputError(f"mode: {mode} needs at least 2 spectral bands (colour); a has one")
         ev = reference.exposure_ev() if exposure_ev is None else exposure_ev
         bands = np.array(reference.wavelengths_nm)
         result = perceptual_map(mode, reference.bands.astype(np.float64), sample.bands, bands, ev)
     else:
-        raise ValueError(f"mode: must be one of {', '.join(COMPARE_MODES)}, got {mode!r}")
+        raise InputError(f"mode: must be one of {', '.join(COMPARE_MODES)}, got {mode!r}")
     return result.astype(np.float32)

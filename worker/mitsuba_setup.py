@@ -2,8 +2,9 @@
 
 Dr.Jit's LLVM backend needs a recent libLLVM (Debian's ``libllvm19``; LLVM 14/15 crash), so the path is
 set through ``DRJIT_LIBLLVM_PATH`` before Mitsuba is imported. The variant is ``cuda_ad_spectral`` where
-an NVIDIA GPU is usable, else ``llvm_ad_spectral``; ``HGRENDER_VARIANT`` or an explicit argument wins.
-``HGRENDER_RENDER_THREADS`` (the setting ``render_threads``) sizes Dr.Jit's CPU thread pool.
+an NVIDIA GPU is usable, else ``llvm_ad_spectral``; the setting ``variant`` (``HGRENDER_VARIANT``) or an
+explicit argument wins. The setting ``render_threads`` (``HGRENDER_RENDER_THREADS``) sizes Dr.Jit's CPU
+thread pool. Both are read from the process's ``hgcore.settings.Settings``.
 """
 
 from __future__ import annotations
@@ -11,6 +12,9 @@ from __future__ import annotations
 import glob
 import os
 from types import ModuleType
+
+from hgcore.errors import InputError
+from hgcore.settings import Settings
 
 SUPPORTED_VARIANTS = ("llvm_ad_spectral", "cuda_ad_spectral")
 _LIBLLVM_PATTERNS = (
@@ -54,22 +58,23 @@ def _cuda_available(mitsuba: ModuleType) -> bool:
 def load_mitsuba(variant: str | None = None) -> ModuleType:
     """Import Mitsuba, select a spectral variant and return the ``mitsuba`` module.
 
-    ``variant`` (or ``HGRENDER_VARIANT``) may be ``auto`` or one of ``SUPPORTED_VARIANTS``.
+    ``variant`` (default: the setting ``variant``) may be ``auto`` or one of ``SUPPORTED_VARIANTS``.
     """
     point_drjit_at_libllvm()
     import mitsuba as mi
 
-    threads = os.environ.get("HGRENDER_RENDER_THREADS")
+    settings = Settings()
+    threads = settings.render_threads
     if threads:
         # Workers started side by side share the cores (`hgrender serve` sets cores // workers).
         import drjit as dr
 
         dr.set_thread_count(int(threads))
-    requested = variant or os.environ.get("HGRENDER_VARIANT", "auto")
+    requested = variant or settings.variant
     if requested == "auto":
         requested = "cuda_ad_spectral" if _cuda_available(mi) else "llvm_ad_spectral"
     if requested not in SUPPORTED_VARIANTS:
-        raise ValueError(f"variant: {requested!r} is not one of {', '.join(SUPPORTED_VARIANTS)} or 'auto'")
+        raise InputError(f"variant: {requested!r} is not one of {', '.join(SUPPORTED_VARIANTS)} or 'auto'")
     if mi.variant() != requested:
         mi.set_variant(requested)
     return mi

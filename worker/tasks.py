@@ -49,12 +49,20 @@ from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
 from schemas.scene import MAX_FILM_MODES, Scene
+from worker.queue_worker import HORSE_TEMP_PREFIX
 
 if TYPE_CHECKING:
     from worker.render.api import RenderedChunk
 
 CANCEL_POLL_INTERVAL_S = 0.5
 """How often a running chunk re-reads its job's status (a cancel stops it within this plus one pass)."""
+
+
+def horse_work_dir(label: str) -> tempfile.TemporaryDirectory[str]:
+    """A temporary folder for one step, named after this work horse's pid
+    (``worker.queue_worker.HORSE_TEMP_PREFIX``): when the horse is killed before it could clean up, its
+    worker removes what it left (``remove_horse_temp_dirs``)."""
+    return tempfile.TemporaryDirectory(prefix=f"{HORSE_TEMP_PREFIX.format(pid=os.getpid())}{label}-")
 
 
 def preload_renderer() -> None:
@@ -225,7 +233,7 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
         return skipped
     from worker.render.api import save_chunk
 
-    with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-{chunk_index}-") as tmp:
+    with horse_work_dir(f"{job_id}-{chunk_index}") as tmp:
         outcome = _render_chunk(jobs, rq_job, job_id, record, chunk_index, Path(tmp))
         if outcome is None:
             return {"canceled": True}
@@ -245,7 +253,7 @@ def render_job_task(job_id: str) -> dict[str, Any]:
         record = jobs.record(job_id)
         if (skipped := _skipped(record)) is not None:
             return skipped
-        with tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-") as tmp:
+        with horse_work_dir(job_id) as tmp:
             work_dir = Path(tmp)
             with _step("chunk 0"):
                 outcome = _render_chunk(jobs, rq_job, job_id, record, 0, work_dir)
@@ -362,7 +370,7 @@ def merge_task(job_id: str) -> dict[str, Any]:
         if failures:
             _fail(jobs, job_id, "; ".join(failures))
             return {"failed": failures}
-        with _step("merge"), tempfile.TemporaryDirectory(prefix=f"hgrender-{job_id}-merge-") as tmp:
+        with _step("merge"), horse_work_dir(f"{job_id}-merge") as tmp:
             from worker.render.api import load_chunks
 
             started_s = _merge_started(jobs, rq_job, job_id)

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hgcore.errors import InputError
+
 # ---------------------------------------------------------------- artifact file names (one job's directory)
 IMAGE_EXR = "image.exr"
 VARIANCE_EXR = "variance.exr"
@@ -55,11 +57,11 @@ def is_spectral_channel(name: str) -> bool:
 def spectral_channel_wavelength_nm(name: str) -> float:
     """The band centre (nm) of a spectral channel name; ValueError names anything else."""
     if not is_spectral_channel(name):
-        raise ValueError(f"name: {name!r} is not a spectral channel S0.<wavelength>nm")
+        raise InputError(f"name: {name!r} is not a spectral channel S0.<wavelength>nm")
     try:
         return float(name[len(SPECTRAL_PREFIX) : -2].replace(",", "."))
     except ValueError:
-        raise ValueError(f"name: {name!r} is not a spectral channel S0.<wavelength>nm") from None
+        raise InputError(f"name: {name!r} is not a spectral channel S0.<wavelength>nm") from None
 
 
 def coherence_channel(diagnostic: str) -> str:

@@ -6,4 +6,5 @@
 * ``queue_graph`` — the RQ job graph of a job: task names, RQ ids, queues, and how it is enqueued.
 * ``records``     — ``JobRecords``: the record in Redis, atomic transitions, events, and the chunk
                     bookkeeping that workers write.
+* ``reconcile``   — ``QueueReconciler``: re-enqueues the RQ steps of unfinished jobs that nothing will run.
 """

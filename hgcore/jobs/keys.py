@@ -9,6 +9,7 @@
 ``idempotency:<o>:<k>`` string: the job id an idempotency key of owner ``o`` names
 ``events:<id>``         pub/sub channel of progress and status events (SSE)
 ``metrics:*``           counters of rendered samples and render seconds
+``reconcile-lock``      held while a reconciliation runs
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ JOBS_INDEX = "hgrender:jobs"
 JOBS_BY_STATE = "hgrender:jobs:by_state"
 RENDER_SECONDS_TOTAL = "hgrender:metrics:render_seconds_total"
 SAMPLES_TOTAL = "hgrender:metrics:samples_total"
+RECONCILE_LOCK = "hgrender:reconcile-lock"
+"""Held while one reconciliation runs (``hgcore.jobs.reconcile``)."""
 
 
 def job_key(job_id: str) -> str:

@@ -46,12 +46,25 @@ def rq_ids(job_id: str, chunk_count: int) -> list[str]:
 
 
 def enqueue_job_graph(
-    pipe: redis.client.Pipeline, queue: Queue, job_id: str, chunk_count: int, settings: Settings
+    pipe: redis.client.Pipeline,
+    queue: Queue,
+    job_id: str,
+    chunk_count: int,
+    settings: Settings,
+    only: str | None = None,
 ) -> None:
     """Add, in ``pipe``'s transaction, the chunk jobs (queued) and the merge job (deferred on all chunks,
-    failures allowed), or for a one-chunk job the single job that renders and merges."""
+    failures allowed), or for a one-chunk job the single job that renders and merges. ``only``: recreate
+    just that RQ job (reconciliation), at the front of the queue.
+
+    Finished work first: a retry goes to the front of its queue, and so does a merge once its last chunk
+    ended, so a backlog of new chunks delays neither (jobs finish in submission order)."""
     retry = (
-        Retry(max=settings.chunk_retry_max, interval=settings.chunk_retry_intervals_s)
+        Retry(
+            max=settings.chunk_retry_max,
+            interval=settings.chunk_retry_intervals_s,
+            enqueue_at_front=True,
+        )
         if settings.chunk_retry_max > 0
         else None
     )
@@ -62,31 +75,29 @@ def enqueue_job_graph(
         "retry": retry,
     }
     if chunk_count == 1:
-        render = queue.create_job(
-            RENDER_JOB_TASK,
-            args=(job_id,),
-            job_id=merge_rq_id(job_id),
-            description=f"render and merge job {job_id}",
-            **common,
-        )
-        queue.enqueue_job(render, pipeline=pipe)
+        steps = [(RENDER_JOB_TASK, (job_id,), merge_rq_id(job_id), f"render and merge job {job_id}")]
+    else:
+        steps = [
+            (CHUNK_TASK, (job_id, index), chunk_rq_id(job_id, index), f"render chunk {index} of job {job_id}")
+            for index in range(chunk_count)
+        ]
+    for task, args, rq_id, description in steps:
+        if only not in (None, rq_id):
+            continue
+        step = queue.create_job(task, args=args, job_id=rq_id, description=description, **common)
+        # Enqueued at the back now; any later enqueue (a retry, a dead worker's chunk found by the
+        # maintenance pass) goes to the front (RQ's ``Job.should_enqueue_at_front``).
+        step.enqueue_at_front = True
+        queue.enqueue_job(step, pipeline=pipe, at_front=only is not None)
+    if chunk_count == 1 or only not in (None, merge_rq_id(job_id)):
         return
-    chunk_ids = [chunk_rq_id(job_id, index) for index in range(chunk_count)]
-    for index, rq_id in enumerate(chunk_ids):
-        chunk = queue.create_job(
-            CHUNK_TASK,
-            args=(job_id, index),
-            job_id=rq_id,
-            description=f"render chunk {index} of job {job_id}",
-            **common,
-        )
-        queue.enqueue_job(chunk, pipeline=pipe)
+    chunk_ids = [rq_id for _, _, rq_id, _ in steps]
     merge = queue.create_job(
         MERGE_TASK,
         args=(job_id,),
         job_id=merge_rq_id(job_id),
         description=f"merge job {job_id}",
-        depends_on=Dependency(jobs=chunk_ids, allow_failure=True),
+        depends_on=Dependency(jobs=chunk_ids, allow_failure=True, enqueue_at_front=True),
         status=RQJobStatus.DEFERRED,
         **common,
     )

@@ -143,22 +143,26 @@ class JobRecords:
         self, job_id: str, index: int | str, worker: str, pid: int, spp: int | None = None
     ) -> None:
         """A work horse (process ``pid`` of ``worker``) began chunk ``index`` (or ``merge``)."""
-        prefix = f"{index}."
+        fields = {
+            "status": "running",
+            "progress": "0",
+            "worker": worker,
+            "pid": str(pid),
+            "spp": "" if spp is None else str(spp),
+            "started_at": repr(time.time()),
+        }
         with self.client.pipeline() as pipe:
-            pipe.hset(
-                chunks_key(job_id),
-                mapping={
-                    prefix + "status": "running",
-                    prefix + "progress": "0",
-                    prefix + "worker": worker,
-                    prefix + "pid": str(pid),
-                    prefix + "spp": "" if spp is None else str(spp),
-                    prefix + "started_at": repr(time.time()),
-                },
-            )
-            pipe.hincrby(chunks_key(job_id), prefix + "attempts", 1)
+            self._set_chunk_fields(pipe, job_id, index, fields, count="attempts")
             pipe.execute()
         self.transition(job_id, JobStatus.RUNNING, started_at=repr(time.time()))
+
+    @staticmethod
+    def _set_chunk_fields(
+        pipe: redis.client.Pipeline, job_id: str, index: int | str, fields: dict[str, str], count: str
+    ) -> None:
+        """Queue ``<index>.<field>`` writes for one chunk and one increment of its ``count`` field."""
+        pipe.hset(chunks_key(job_id), mapping={f"{index}.{name}": value for name, value in fields.items()})
+        pipe.hincrby(chunks_key(job_id), f"{index}.{count}", 1)
 
     def chunk_progress(self, job_id: str, index: int, fraction: float) -> None:
         """Store one chunk's progress and publish the job's aggregated progress."""
@@ -184,19 +188,15 @@ class JobRecords:
 
     def chunk_finished(self, job_id: str, index: int | str, samples: int, seconds: float) -> None:
         """A chunk (or ``merge``) completed: count the completion (tests check it is counted once)."""
-        prefix = f"{index}."
+        fields = {
+            "status": "done",
+            "progress": "1",
+            "samples": str(samples),
+            "seconds": repr(seconds),
+            "finished_at": repr(time.time()),
+        }
         with self.client.pipeline() as pipe:
-            pipe.hset(
-                chunks_key(job_id),
-                mapping={
-                    prefix + "status": "done",
-                    prefix + "progress": "1",
-                    prefix + "samples": str(samples),
-                    prefix + "seconds": repr(seconds),
-                    prefix + "finished_at": repr(time.time()),
-                },
-            )
-            pipe.hincrby(chunks_key(job_id), prefix + "completions", 1)
+            self._set_chunk_fields(pipe, job_id, index, fields, count="completions")
             pipe.incrbyfloat(RENDER_SECONDS_TOTAL, seconds)
             pipe.incrby(SAMPLES_TOTAL, samples)
             pipe.execute()

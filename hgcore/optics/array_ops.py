@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.errors import InputError
+
 
 @dataclass(frozen=True)
 class ArrayOps:
@@ -35,21 +37,17 @@ class ArrayOps:
     def clip(self, value: Any, low: float, high: float) -> Any:
         return self.minimum(self.maximum(value, low), high)
 
+    @classmethod
+    def of(cls, name: str, library: Any, atan2: Any, where: Any) -> ArrayOps:
+        """The namespace of an array ``library`` whose element-wise functions carry the usual names;
+        ``atan2`` and ``where`` are the two that libraries name differently."""
+        functions = {f: getattr(library, f) for f in ("exp", "log", "sqrt", "sin", "cos", "abs", "floor")}
+        return cls(
+            name=name, atan2=atan2, where=where, minimum=library.minimum, maximum=library.maximum, **functions
+        )
 
-NUMPY = ArrayOps(
-    name="numpy",
-    exp=np.exp,
-    log=np.log,
-    sqrt=np.sqrt,
-    sin=np.sin,
-    cos=np.cos,
-    atan2=np.arctan2,
-    abs=np.abs,
-    minimum=np.minimum,
-    maximum=np.maximum,
-    where=np.where,
-    floor=np.floor,
-)
+
+NUMPY = ArrayOps.of("numpy", np, atan2=np.arctan2, where=np.where)
 
 
 def hermite_functions(u: Any, max_order: int, ops: ArrayOps = NUMPY) -> list[Any]:
@@ -75,7 +73,7 @@ def transverse_modes(mode_count: int) -> list[tuple[int, int]]:
     by increasing order n + m, then decreasing n. Counts 1, 4, 9, 16 close the orders 0, 2, 4, 6.
     """
     if mode_count < 1:
-        raise ValueError(f"modes: must be at least 1, got {mode_count}")
+        raise InputError(f"modes: must be at least 1, got {mode_count}")
     modes: list[tuple[int, int]] = []
     order = 0
     while len(modes) < mode_count:

@@ -13,6 +13,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from hgcore.errors import InputError
 from hgcore.optics.coherence import (
     coherence_diagnostics,
     require_positive_definite,
@@ -34,7 +35,7 @@ NANOMETRES_TO_METRES = 1e-9
 def _wavelength_m(wavelength_nm: float) -> float:
     value = float(wavelength_nm)
     if not math.isfinite(value) or not MIN_WAVELENGTH_NM <= value <= MAX_WAVELENGTH_NM:
-        raise ValueError(
+        raise InputError(
             f"wavelength_nm: must be within {MIN_WAVELENGTH_NM:g}-{MAX_WAVELENGTH_NM:g} nm, "
             f"got {wavelength_nm}"
         )
@@ -43,7 +44,7 @@ def _wavelength_m(wavelength_nm: float) -> float:
 
 def _mode_count(modes: int) -> int:
     if isinstance(modes, bool) or not isinstance(modes, int) or not 1 <= modes <= MAX_MODES:
-        raise ValueError(f"modes: must be an integer in 1..{MAX_MODES}, got {modes!r}")
+        raise InputError(f"modes: must be an integer in 1..{MAX_MODES}, got {modes!r}")
     return modes
 
 
@@ -73,7 +74,7 @@ def coherence_at(
     the offending parameter for any invalid input.
     """
     if source not in SOURCE_KINDS:
-        raise ValueError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {source!r}")
+        raise InputError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {source!r}")
     wavelength_m = _wavelength_m(wavelength_nm)
     distance = positive_size(distance_m, "distance_m")
     mode_count = _mode_count(modes)

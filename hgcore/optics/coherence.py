@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import NUMPY, ArrayOps, hermite_functions
 
 DEFAULT_WAVELENGTH_M = 550e-9
@@ -45,12 +46,12 @@ def symmetric_2x2(matrix: Any, name: str) -> np.ndarray:
     """``matrix`` as a finite, symmetric float64 2×2 array; ValueError naming ``name`` otherwise."""
     array = np.asarray(matrix, dtype=float)
     if array.shape != (2, 2):
-        raise ValueError(f"{name}: expected a 2x2 matrix, got shape {array.shape}")
+        raise InputError(f"{name}: expected a 2x2 matrix, got shape {array.shape}")
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name}: entries must be finite, got {array.tolist()}")
+        raise InputError(f"{name}: entries must be finite, got {array.tolist()}")
     scale = float(np.max(np.abs(array)))
     if abs(array[0, 1] - array[1, 0]) > 1e-9 * max(scale, 1e-300):
-        raise ValueError(f"{name}: must be symmetric, got {array.tolist()}")
+        raise InputError(f"{name}: must be symmetric, got {array.tolist()}")
     return 0.5 * (array + array.T)
 
 
@@ -60,12 +61,12 @@ def make_positive_definite(matrix: Any, epsilon: float) -> np.ndarray:
     Works for any square symmetric matrix (2×2 transverse or 3×3); units are those of ``matrix``.
     """
     if not (epsilon > 0.0 and math.isfinite(epsilon)):
-        raise ValueError(f"epsilon: must be a positive finite number, got {epsilon}")
+        raise InputError(f"epsilon: must be a positive finite number, got {epsilon}")
     array = np.asarray(matrix, dtype=float)
     if array.ndim != 2 or array.shape[0] != array.shape[1]:
-        raise ValueError(f"matrix: expected a square matrix, got shape {array.shape}")
+        raise InputError(f"matrix: expected a square matrix, got shape {array.shape}")
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"matrix: entries must be finite, got {array.tolist()}")
+        raise InputError(f"matrix: entries must be finite, got {array.tolist()}")
     eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (array + array.T))
     repaired = np.maximum(np.abs(eigenvalues), epsilon)
     return (eigenvectors * repaired) @ eigenvectors.T
@@ -76,7 +77,7 @@ def require_positive_definite(matrix: np.ndarray, name: str) -> np.ndarray:
     symmetric = symmetric_2x2(matrix, name) if np.shape(matrix) == (2, 2) else np.asarray(matrix, float)
     eigenvalues = np.linalg.eigvalsh(symmetric)
     if not np.all(eigenvalues > 0.0):
-        raise ValueError(
+        raise InputError(
             f"{name}: must be positive-definite, got eigenvalues {eigenvalues.tolist()} "
             f"of {symmetric.tolist()}"
         )
@@ -101,10 +102,10 @@ def shape_matrix_from_log_hessian(hessian: Any, epsilon: float = 1e-300) -> np.n
     """
     array = np.asarray(hessian, dtype=float)
     if array.ndim != 2 or array.shape[0] != array.shape[1] or not np.all(np.isfinite(array)):
-        raise ValueError(f"hessian: expected a finite square matrix, got {array.tolist()}")
+        raise InputError(f"hessian: expected a finite square matrix, got {array.tolist()}")
     eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (array + array.T))
     if np.any(eigenvalues == 0.0):
-        raise ValueError(f"hessian: singular (eigenvalues {eigenvalues.tolist()}); Θ would be infinite")
+        raise InputError(f"hessian: singular (eigenvalues {eigenvalues.tolist()}); Θ would be infinite")
     theta = (eigenvectors * (-1.0 / eigenvalues)) @ eigenvectors.T
     return make_positive_definite(theta, epsilon)
 
@@ -188,9 +189,9 @@ def coherence_diagnostics(
     """Diagnostics of a beam with transverse covariance Σ⊥ (m², 2×2) after propagating ``r_m`` metres."""
     sigma = require_positive_definite(symmetric_2x2(sigma_m2, "sigma_m2"), "sigma_m2")
     if not (r_m > 0.0 and math.isfinite(r_m)):
-        raise ValueError(f"r_m: must be a positive finite distance in metres, got {r_m}")
+        raise InputError(f"r_m: must be a positive finite distance in metres, got {r_m}")
     if not (wavelength_m > 0.0 and math.isfinite(wavelength_m)):
-        raise ValueError(f"wavelength_m: must be a positive finite wavelength in metres, got {wavelength_m}")
+        raise InputError(f"wavelength_m: must be a positive finite wavelength in metres, got {wavelength_m}")
     values = diagnostics_components(sigma[0, 0], sigma[0, 1], sigma[1, 1], r_m, wavelength_m, NUMPY)
     return CoherenceDiagnostics(
         l1_um=float(values.l1_um),

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import NUMPY, ArrayOps, transverse_modes
 from hgcore.optics.hg import MultiIndex, dual_hg_functions, hg_functions
 
@@ -38,11 +39,11 @@ def _gauss_hermite(points: int) -> tuple[np.ndarray, np.ndarray]:
 def _positive_definite_array(theta: Any) -> np.ndarray:
     array = np.asarray(theta, dtype=float)
     if array.ndim != 2 or array.shape[0] != array.shape[1] or array.shape[0] not in (2, 3):
-        raise ValueError(f"theta: expected a 2x2 or 3x3 matrix, got shape {array.shape}")
+        raise InputError(f"theta: expected a 2x2 or 3x3 matrix, got shape {array.shape}")
     if not np.all(np.isfinite(array)) or not np.allclose(array, array.T, rtol=1e-12, atol=0.0):
-        raise ValueError(f"theta: must be finite and symmetric, got {array.tolist()}")
+        raise InputError(f"theta: must be finite and symmetric, got {array.tolist()}")
     if not np.all(np.linalg.eigvalsh(array) > 0.0):
-        raise ValueError(f"theta: must be positive-definite, got {array.tolist()}")
+        raise InputError(f"theta: must be positive-definite, got {array.tolist()}")
     return array
 
 
@@ -59,11 +60,11 @@ def project_onto(
     theta_array = _positive_definite_array(theta)
     dimension = theta_array.shape[0]
     if not degrees:
-        raise ValueError("degrees: must list at least one degree")
+        raise InputError("degrees: must list at least one degree")
     if any(len(alpha) != dimension or min(alpha) < 0 for alpha in degrees):
-        raise ValueError(f"degrees: every degree must have {dimension} non-negative entries")
+        raise InputError(f"degrees: every degree must have {dimension} non-negative entries")
     if quadrature_points < 8:
-        raise ValueError(f"quadrature_points: must be at least 8, got {quadrature_points}")
+        raise InputError(f"quadrature_points: must be at least 8, got {quadrature_points}")
     eigenvalues, eigenvectors = np.linalg.eigh(theta_array)
     transform = np.sqrt(2.0) * (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T
     nodes, weights = _gauss_hermite(quadrature_points)
@@ -86,7 +87,7 @@ def project_csd(
 ) -> dict[tuple[int, int], float]:
     """Coefficients of a transverse CSD on its first ``mode_count`` even-order modes (n, m) (Eq. 8)."""
     if np.shape(theta) != (2, 2):
-        raise ValueError(f"theta: a transverse CSD needs a 2x2 shape matrix, got shape {np.shape(theta)}")
+        raise InputError(f"theta: a transverse CSD needs a 2x2 shape matrix, got shape {np.shape(theta)}")
     return project_onto(function, theta, transverse_modes(mode_count), quadrature_points)
 
 
@@ -95,7 +96,7 @@ def reconstruct(
 ) -> Any:
     """Σ_α f̌_α Ψ^Θ_α(x) (Eq. 7) at points ``x`` (d coordinate arrays), NumPy or Dr.Jit."""
     if not coefficients:
-        raise ValueError("coefficients: must contain at least one coefficient")
+        raise InputError("coefficients: must contain at least one coefficient")
     max_order = max(sum(alpha) for alpha in coefficients)
     values = hg_functions(x, [list(row) for row in np.asarray(theta, dtype=float)], max_order, ops)
     total: Any = 0.0

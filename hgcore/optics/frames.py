@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import NUMPY, ArrayOps
 
 Vector3 = tuple[Any, Any, Any]
@@ -77,12 +78,12 @@ def unit_vector(vector: Sequence[float], name: str) -> np.ndarray:
     """``vector`` as a normalised float64 3-vector; ValueError naming ``name`` if not finite/non-zero."""
     array = np.asarray(vector, dtype=float)
     if array.shape != (3,):
-        raise ValueError(f"{name}: expected 3 components X,Y,Z, got {array.size}")
+        raise InputError(f"{name}: expected 3 components X,Y,Z, got {array.size}")
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name}: components must be finite numbers, got {array.tolist()}")
+        raise InputError(f"{name}: components must be finite numbers, got {array.tolist()}")
     length = float(np.linalg.norm(array))
     if length <= 1e-12:
-        raise ValueError(f"{name}: must be a non-zero vector, got {array.tolist()}")
+        raise InputError(f"{name}: must be a non-zero vector, got {array.tolist()}")
     return array / length
 
 

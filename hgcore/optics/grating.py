@@ -41,6 +41,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import ArrayOps, hermite_functions
 from hgcore.optics.coherence import max_degree, principal_axes_components
 from hgcore.optics.rough_surface import hemisphere_direction
@@ -64,17 +65,17 @@ class BinaryGrating:
         for name in ("pitch_x_m", "depth_m", "lobe_width_per_um"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name}: must be finite and > 0, got {value}")
+                raise InputError(f"{name}: must be finite and > 0, got {value}")
         if self.pitch_y_m is not None and not (math.isfinite(self.pitch_y_m) and self.pitch_y_m > 0.0):
-            raise ValueError(
+            raise InputError(
                 f"pitch_y_m: must be finite and > 0 (or None for a 1-D grating), got {self.pitch_y_m}"
             )
         if not 0.0 < self.duty_cycle < 1.0:
-            raise ValueError(f"duty_cycle: must lie in (0, 1), got {self.duty_cycle}")
+            raise InputError(f"duty_cycle: must lie in (0, 1), got {self.duty_cycle}")
         if not (math.isfinite(self.pit_ior) and self.pit_ior >= 1.0):
-            raise ValueError(f"pit_ior: must be a finite real index ≥ 1, got {self.pit_ior}")
+            raise InputError(f"pit_ior: must be a finite real index ≥ 1, got {self.pit_ior}")
         if not 1 <= self.max_order <= 32:
-            raise ValueError(f"max_order: must lie in 1..32, got {self.max_order}")
+            raise InputError(f"max_order: must lie in 1..32, got {self.max_order}")
 
     def orders(self) -> list[tuple[int, int]]:
         """All non-zero orders (p, q) with |p|, |q| ≤ max_order (q = 0 only for a 1-D grating)."""

@@ -25,6 +25,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import NUMPY, ArrayOps
 
 MultiIndex = tuple[int, ...]
@@ -34,9 +35,9 @@ Matrix = Sequence[Sequence[Any]]
 def multi_indices(dimension: int, max_order: int) -> list[MultiIndex]:
     """All degrees α ∈ ℕ^dimension with |α| ≤ max_order, by increasing order then lexicographically."""
     if dimension not in (2, 3):
-        raise ValueError(f"dimension: must be 2 or 3, got {dimension}")
+        raise InputError(f"dimension: must be 2 or 3, got {dimension}")
     if max_order < 0:
-        raise ValueError(f"max_order: must be non-negative, got {max_order}")
+        raise InputError(f"max_order: must be non-negative, got {max_order}")
     indices = [a for a in itertools.product(range(max_order + 1), repeat=dimension) if sum(a) <= max_order]
     return sorted(indices, key=lambda a: (sum(a), tuple(-c for c in a)))
 
@@ -63,7 +64,7 @@ def inverse_and_determinant(matrix: Matrix) -> tuple[list[list[Any]], Any]:
         inv_det = 1.0 / det
         # inverse = adjugate / det, adjugate = cofactorᵀ.
         return [[cofactor[j][i] * inv_det for j in range(3)] for i in range(3)], det
-    raise ValueError(f"theta: must be 2x2 or 3x3, got {size}x{size}")
+    raise InputError(f"theta: must be 2x2 or 3x3, got {size}x{size}")
 
 
 def _hg_from_inverse(
@@ -124,6 +125,6 @@ def dual_hg_functions(
 def _check_dimensions(x: Sequence[Any], theta: Matrix) -> None:
     dimension = len(x)
     if dimension not in (2, 3):
-        raise ValueError(f"x: must have 2 or 3 coordinates, got {dimension}")
+        raise InputError(f"x: must have 2 or 3 coordinates, got {dimension}")
     if len(theta) != dimension or any(len(row) != dimension for row in theta):
-        raise ValueError(f"theta: must be {dimension}x{dimension} to match x")
+        raise InputError(f"theta: must be {dimension}x{dimension} to match x")

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hgcore.errors import InputError
 from hgcore.optics.spectra import load_data_csv
 
 # The project-wide wavelength window (issue 2): anything outside is rejected before a material is consulted.
@@ -85,7 +86,7 @@ def canonical_material(material: str) -> str:
     key = material.strip().lower()
     key = ALIASES.get(key, key)
     if key not in MATERIALS:
-        raise ValueError(f"material: unknown {material!r}; choose one of {', '.join(MATERIALS)}")
+        raise InputError(f"material: unknown {material!r}; choose one of {', '.join(MATERIALS)}")
     return key
 
 
@@ -110,15 +111,15 @@ def spectral_ior(material: str, wavelength_nm: float | np.ndarray) -> tuple[np.n
     key = canonical_material(material)
     wavelengths = np.asarray(wavelength_nm, dtype=float)
     if not np.all(np.isfinite(wavelengths)):
-        raise ValueError("wavelength_nm: must be finite")
+        raise InputError("wavelength_nm: must be finite")
     if np.any(wavelengths < MIN_WAVELENGTH_NM) or np.any(wavelengths > MAX_WAVELENGTH_NM):
-        raise ValueError(
+        raise InputError(
             f"wavelength_nm: must lie in {MIN_WAVELENGTH_NM:g}–{MAX_WAVELENGTH_NM:g} nm, "
             f"got {wavelengths.min():g}–{wavelengths.max():g}"
         )
     low_nm, high_nm = material_range_nm(key)
     if np.any(wavelengths < low_nm) or np.any(wavelengths > high_nm):
-        raise ValueError(
+        raise InputError(
             f"wavelength_nm: {key} data cover {low_nm:.1f}–{high_nm:.1f} nm, "
             f"got {wavelengths.min():g}–{wavelengths.max():g}"
         )
@@ -137,9 +138,9 @@ def ior_table(material: str, grid_nm: np.ndarray) -> np.ndarray:
     """
     grid = np.asarray(grid_nm, dtype=float)
     if grid.ndim != 1 or grid.size < 2 or not np.all(np.diff(grid) > 0.0):
-        raise ValueError("grid_nm: must be a 1-D, strictly increasing grid of at least 2 wavelengths")
+        raise InputError("grid_nm: must be a 1-D, strictly increasing grid of at least 2 wavelengths")
     if grid.min() < MIN_WAVELENGTH_NM or grid.max() > MAX_WAVELENGTH_NM:
-        raise ValueError(
+        raise InputError(
             f"grid_nm: must lie in {MIN_WAVELENGTH_NM:g}–{MAX_WAVELENGTH_NM:g} nm, "
             f"got {grid.min():g}–{grid.max():g}"
         )

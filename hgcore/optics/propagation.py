@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import NUMPY, ArrayOps
 from hgcore.optics.coherence import (
     DEFAULT_WAVELENGTH_M,
@@ -65,12 +66,12 @@ class CoherenceState:
     def __post_init__(self) -> None:
         require_positive_definite(symmetric_2x2(self.sigma_m2, "sigma_m2"), "sigma_m2")
         if not (self.r_m > 0.0 and math.isfinite(self.r_m)):
-            raise ValueError(f"r_m: must be a positive finite distance in metres, got {self.r_m}")
+            raise InputError(f"r_m: must be a positive finite distance in metres, got {self.r_m}")
         frame = np.array([self.x_axis, self.y_axis, self.direction], dtype=float)
         if frame.shape != (3, 3) or not np.allclose(frame @ frame.T, np.eye(3), atol=1e-9):
-            raise ValueError("x_axis: (x_axis, y_axis, direction) must be an orthonormal frame")
+            raise InputError("x_axis: (x_axis, y_axis, direction) must be an orthonormal frame")
         if np.linalg.det(frame) < 0.0:
-            raise ValueError("y_axis: (x_axis, y_axis, direction) must be right-handed (y = direction × x)")
+            raise InputError("y_axis: (x_axis, y_axis, direction) must be right-handed (y = direction × x)")
 
     @classmethod
     def from_source(
@@ -100,7 +101,7 @@ class CoherenceState:
     def propagated(self, distance_m: float) -> CoherenceState:
         """After ``distance_m`` more metres of free space: r grows, Θ and the frame are unchanged."""
         if not (distance_m >= 0.0 and math.isfinite(distance_m)):
-            raise ValueError(f"distance_m: must be a non-negative finite distance, got {distance_m}")
+            raise InputError(f"distance_m: must be a non-negative finite distance, got {distance_m}")
         return replace(self, r_m=self.r_m + float(distance_m))
 
     def reflected(self, normal: Sequence[float]) -> CoherenceState:
@@ -121,7 +122,7 @@ class CoherenceState:
         Raises ValueError on total internal reflection (no refracted beam exists).
         """
         if not (relative_ior > 0.0 and math.isfinite(relative_ior)):
-            raise ValueError(f"relative_ior: must be a positive finite ratio, got {relative_ior}")
+            raise InputError(f"relative_ior: must be a positive finite ratio, got {relative_ior}")
         unit_normal = unit_vector(normal, "normal")
         cos_incident = -float(np.dot(self.direction, unit_normal))
         if cos_incident < 0.0:  # normal given on the far side: face it towards the incident beam
@@ -129,7 +130,7 @@ class CoherenceState:
         eta = 1.0 / relative_ior
         sin_transmitted2 = eta * eta * (1.0 - cos_incident * cos_incident)
         if sin_transmitted2 > 1.0:
-            raise ValueError(f"relative_ior: total internal reflection at cos θi = {cos_incident:.6g}")
+            raise InputError(f"relative_ior: total internal reflection at cos θi = {cos_incident:.6g}")
         cos_transmitted = math.sqrt(1.0 - sin_transmitted2)
         direction = eta * self.direction + (eta * cos_incident - cos_transmitted) * unit_normal
         direction = direction / np.linalg.norm(direction)
@@ -141,7 +142,7 @@ class CoherenceState:
         """The same beam with Σ⊥ expressed in the transverse frame with x axis ``x_axis`` (⟂ direction)."""
         new_x = unit_vector(x_axis, "x_axis")
         if abs(float(np.dot(new_x, self.direction))) > 1e-9:
-            raise ValueError("x_axis: must be perpendicular to the propagation direction")
+            raise InputError("x_axis: must be perpendicular to the propagation direction")
         new_y = np.cross(self.direction, new_x)
         # Rows: new axes in the old (x, y) coordinates; Σ' = R Σ Rᵀ.
         rotation = np.array(

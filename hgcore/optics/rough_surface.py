@@ -39,6 +39,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import ArrayOps
 
 PsdModel = Literal["gaussian", "abc"]
@@ -55,15 +56,15 @@ class RoughSurface:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rms_height_m) and self.rms_height_m >= 0.0):
-            raise ValueError(f"rms_height_m: must be a finite length ≥ 0 m, got {self.rms_height_m}")
+            raise InputError(f"rms_height_m: must be a finite length ≥ 0 m, got {self.rms_height_m}")
         if not (math.isfinite(self.correlation_length_m) and self.correlation_length_m > 0.0):
-            raise ValueError(
+            raise InputError(
                 f"correlation_length_m: must be a finite length > 0 m, got {self.correlation_length_m}"
             )
         if self.psd_model not in ("gaussian", "abc"):
-            raise ValueError(f"psd_model: must be 'gaussian' or 'abc', got {self.psd_model!r}")
+            raise InputError(f"psd_model: must be 'gaussian' or 'abc', got {self.psd_model!r}")
         if not (math.isfinite(self.abc_exponent) and self.abc_exponent > 1.0):
-            raise ValueError(
+            raise InputError(
                 f"abc_exponent: must be finite and > 1 (normalisable PSD), got {self.abc_exponent}"
             )
 

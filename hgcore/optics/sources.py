@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 from scipy.special import j1
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import NUMPY, ArrayOps, hermite_functions
 from hgcore.optics.expansion import project_csd
 from hgcore.optics.frames import Vector3, cross3, dot3, transverse_frame, unit_vector
@@ -167,12 +168,12 @@ class TransverseCovariance:
 def positive_size(value: float | None, name: str) -> float:
     """``value`` as a float if it is a positive finite size, else ValueError naming ``name``."""
     if value is None:
-        raise ValueError(f"{name}: required for this source")
+        raise InputError(f"{name}: required for this source")
     number = float(value)
     if not math.isfinite(number):
-        raise ValueError(f"{name}: must be a finite number, got {value}")
+        raise InputError(f"{name}: must be a finite number, got {value}")
     if number <= 0.0:
-        raise ValueError(f"{name}: must be positive, got {value}")
+        raise InputError(f"{name}: must be positive, got {value}")
     return number
 
 
@@ -183,7 +184,7 @@ def facing_plane_axes(axis: np.ndarray, direction: np.ndarray) -> tuple[np.ndarr
     v_axis = np.cross(direction, axis)
     length = float(np.linalg.norm(v_axis))
     if length < 1e-6:
-        raise ValueError("axis: parallel to the direction, so a flat source is seen exactly edge-on")
+        raise InputError("axis: parallel to the direction, so a flat source is seen exactly edge-on")
     return axis, v_axis / length
 
 
@@ -205,7 +206,7 @@ def transverse_covariance(
     about which the emitter is turned to face the receiver (``facing_plane_axes``); ignored otherwise.
     """
     if kind not in SOURCE_KINDS:
-        raise ValueError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {kind!r}")
+        raise InputError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {kind!r}")
     unit_direction = unit_vector(direction, "direction")
     unit_axis = unit_vector(axis, "axis")
     x_axis, y_axis = transverse_frame(unit_direction, reference)
@@ -240,9 +241,9 @@ def covariance_from_intensity_image(image: Any, pixel_size_m: float) -> np.ndarr
     """
     intensity = np.asarray(image, dtype=float)
     if intensity.ndim != 2 or min(intensity.shape) < 1:
-        raise ValueError(f"image: expected a 2-D intensity array, got shape {intensity.shape}")
+        raise InputError(f"image: expected a 2-D intensity array, got shape {intensity.shape}")
     if not np.all(np.isfinite(intensity)) or np.any(intensity < 0.0) or intensity.sum() <= 0.0:
-        raise ValueError("image: intensities must be finite, non-negative and not all zero")
+        raise InputError("image: intensities must be finite, non-negative and not all zero")
     pixel = positive_size(pixel_size_m, "pixel_size_m")
     rows, columns = np.indices(intensity.shape, dtype=float)
     weights = intensity / intensity.sum()
@@ -271,7 +272,7 @@ def log_hessian_at_origin(
     def log_f(zx: float, zy: float) -> float:
         value = float(angular_coherence(zx, zy))
         if not (value > 0.0 and math.isfinite(value)):
-            raise ValueError(f"angular_coherence: must be positive near 0, got {value} at ({zx}, {zy})")
+            raise InputError(f"angular_coherence: must be positive near 0, got {value} at ({zx}, {zy})")
         return math.log(value)
 
     def central(h: float) -> np.ndarray:
@@ -307,7 +308,7 @@ def whitened_angular_coherence(kind: str) -> Callable[[np.ndarray, np.ndarray], 
         return lambda u1, u2: np.sinc(math.sqrt(3.0) * u1 / math.pi) * np.sinc(math.sqrt(3.0) * u2 / math.pi)
     if kind == "gaussian":
         return lambda u1, u2: np.exp(-0.5 * (u1 * u1 + u2 * u2))
-    raise ValueError(f"kind: must be one of disk, rect, gaussian, got {kind!r}")
+    raise InputError(f"kind: must be one of disk, rect, gaussian, got {kind!r}")
 
 
 @lru_cache(maxsize=64)
@@ -335,8 +336,8 @@ def source_coefficients(kind: str, mode_count: int) -> dict[tuple[int, int], flo
     per (kind, mode_count) by Gauss–Hermite quadrature and cached. Use with ``coherence.degree_of_coherence``.
     """
     if isinstance(mode_count, bool) or not isinstance(mode_count, int) or not 1 <= mode_count <= MAX_MODES:
-        raise ValueError(f"mode_count: must be an integer in 1..{MAX_MODES}, got {mode_count!r}")
+        raise InputError(f"mode_count: must be an integer in 1..{MAX_MODES}, got {mode_count!r}")
     coefficient_kind = COEFFICIENT_KIND.get(kind, kind)
     if coefficient_kind not in ("disk", "rect", "gaussian"):
-        raise ValueError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {kind!r}")
+        raise InputError(f"source: must be one of {', '.join(SOURCE_KINDS)}, got {kind!r}")
     return {(n, m): value for n, m, value in _normalised_coefficients(coefficient_kind, mode_count)}

@@ -36,6 +36,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.hg import hg_functions
@@ -45,13 +46,13 @@ def _validated_particles(positions_m: np.ndarray, amplitudes: np.ndarray) -> tup
     positions = np.asarray(positions_m, dtype=float)
     weights = np.asarray(amplitudes, dtype=float)
     if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 1:
-        raise ValueError(f"positions_m: must have shape (N, 3) with N ≥ 1, got {positions.shape}")
+        raise InputError(f"positions_m: must have shape (N, 3) with N ≥ 1, got {positions.shape}")
     if weights.shape != (positions.shape[0],):
-        raise ValueError(f"amplitudes: must have shape ({positions.shape[0]},), got {weights.shape}")
+        raise InputError(f"amplitudes: must have shape ({positions.shape[0]},), got {weights.shape}")
     if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(weights))):
-        raise ValueError("positions_m: positions and amplitudes must be finite")
+        raise InputError("positions_m: positions and amplitudes must be finite")
     if np.any(weights < 0.0):
-        raise ValueError("amplitudes: scattering coefficients must be non-negative")
+        raise InputError("amplitudes: scattering coefficients must be non-negative")
     return positions, weights
 
 
@@ -65,9 +66,9 @@ def pair_coherence(
 ) -> np.ndarray:
     """μ_jl = μ(p_l − p_j) (N×N) of the incident light over every particle pair (transverse separations)."""
     if not (math.isfinite(distance_m) and distance_m > 0.0):
-        raise ValueError(f"distance_m: must be finite and > 0, got {distance_m}")
+        raise InputError(f"distance_m: must be finite and > 0, got {distance_m}")
     if not (math.isfinite(wavelength_m) and wavelength_m > 0.0):
-        raise ValueError(f"wavelength_m: must be finite and > 0, got {wavelength_m}")
+        raise InputError(f"wavelength_m: must be finite and > 0, got {wavelength_m}")
     axis_1, axis_2 = (np.asarray(axis, dtype=float) for axis in frame)
     separations = positions_m[None, :, :] - positions_m[:, None, :]  # [j, l] = p_l − p_j
     xi = (separations @ axis_1, separations @ axis_2)
@@ -88,7 +89,7 @@ def speckle_intensity(
     positions, weights = _validated_particles(positions_m, amplitudes)
     phi = np.atleast_2d(np.asarray(scattering_vectors_per_m, dtype=float))
     if phi.shape[1] != 3:
-        raise ValueError(f"scattering_vectors_per_m: must have shape (M, 3), got {phi.shape}")
+        raise InputError(f"scattering_vectors_per_m: must have shape (M, 3), got {phi.shape}")
     coherence = pair_coherence(positions, frame, sigma_m2, distance_m, wavelength_m, coefficients)
     pair_weight = coherence * np.outer(weights, weights)
     # (p_l − p_j)·φ = p_l·φ − p_j·φ: expand the cosine to keep memory at O(N·M + N²).
@@ -113,7 +114,7 @@ def angular_coherence_coefficients(
     positions, weights = _validated_particles(positions_m, amplitudes)
     theta = np.asarray(theta_per_m2, dtype=float)
     if theta.shape != (2, 2) or not np.allclose(theta, theta.T) or np.any(np.linalg.eigvalsh(theta) <= 0.0):
-        raise ValueError("theta_per_m2: must be a symmetric positive-definite 2×2 matrix")
+        raise InputError("theta_per_m2: must be a symmetric positive-definite 2×2 matrix")
     axis_1, axis_2 = (np.asarray(axis, dtype=float) for axis in frame)
     projected = [positions @ axis_1, positions @ axis_2]
     primal = hg_functions(projected, np.linalg.inv(theta).tolist(), max_order, NUMPY)

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hgcore.errors import InputError
+
 DATA_DIR = Path(__file__).resolve().parent / "data"
 
 PLANCK_J_S = 6.62607015e-34
@@ -38,14 +40,14 @@ def load_data_csv(filename: str) -> tuple[tuple[str, ...], np.ndarray]:
 def _validated_wavelengths(wavelength_nm: float | np.ndarray) -> np.ndarray:
     wavelengths = np.asarray(wavelength_nm, dtype=float)
     if not np.all(np.isfinite(wavelengths)) or np.any(wavelengths <= 0.0):
-        raise ValueError("wavelength_nm: must be finite and > 0 nm")
+        raise InputError("wavelength_nm: must be finite and > 0 nm")
     return wavelengths
 
 
 def planck_radiance(wavelength_nm: float | np.ndarray, temperature_k: float) -> np.ndarray:
     """Blackbody spectral radiance B_λ(T) in W·m⁻²·sr⁻¹·nm⁻¹."""
     if not (math.isfinite(temperature_k) and temperature_k > 0.0):
-        raise ValueError(f"temperature_k: must be finite and > 0 K, got {temperature_k}")
+        raise InputError(f"temperature_k: must be finite and > 0 K, got {temperature_k}")
     wavelength_m = _validated_wavelengths(wavelength_nm) * 1e-9
     exponent = PLANCK_J_S * SPEED_OF_LIGHT_M_PER_S / (wavelength_m * BOLTZMANN_J_PER_K * temperature_k)
     with np.errstate(over="ignore"):  # far below the peak expm1 overflows to inf and B_λ correctly to 0
@@ -68,7 +70,7 @@ def cie_illuminant(name: str, wavelength_nm: float | np.ndarray) -> np.ndarray:
     """Relative spectral power of CIE illuminant ``name`` ('d65', 'f1' … 'f12'; 'fl2' also accepted)."""
     key = name.strip().lower().replace("fl", "f")
     if key not in ILLUMINANTS:
-        raise ValueError(f"name: unknown illuminant {name!r}; choose one of {', '.join(ILLUMINANTS)}")
+        raise InputError(f"name: unknown illuminant {name!r}; choose one of {', '.join(ILLUMINANTS)}")
     table = _illuminant_table(key)
     return np.interp(_validated_wavelengths(wavelength_nm), table[:, 0], table[:, 1], left=0.0, right=0.0)
 
@@ -92,10 +94,10 @@ def spectrum_values(kind: str, wavelength_nm: float | np.ndarray, **params: floa
     key = kind.strip().lower()
     scale = float(params.pop("scale", 1.0))
     if not math.isfinite(scale) or scale < 0.0:
-        raise ValueError(f"scale: must be finite and ≥ 0, got {scale}")
+        raise InputError(f"scale: must be finite and ≥ 0, got {scale}")
     if key == "blackbody":
         if "temperature_k" not in params:
-            raise ValueError("temperature_k: required for a blackbody spectrum")
+            raise InputError("temperature_k: required for a blackbody spectrum")
         values = planck_radiance(wavelength_nm, float(params.pop("temperature_k")))
     elif key == "equal_energy":
         values = np.ones_like(_validated_wavelengths(wavelength_nm))
@@ -104,9 +106,9 @@ def spectrum_values(kind: str, wavelength_nm: float | np.ndarray, **params: floa
             values = cie_illuminant(key, wavelength_nm)
         except ValueError:
             choices = ", ".join(("blackbody", "equal_energy", *ILLUMINANTS))
-            raise ValueError(f"kind: unknown spectrum {kind!r}; choose one of {choices}") from None
+            raise InputError(f"kind: unknown spectrum {kind!r}; choose one of {choices}") from None
     if params:
-        raise ValueError(f"{next(iter(params))}: not a parameter of the {key} spectrum")
+        raise InputError(f"{next(iter(params))}: not a parameter of the {key} spectrum")
     return scale * values
 
 
@@ -114,6 +116,6 @@ def spectrum_to_xyz(wavelength_nm: np.ndarray, values: np.ndarray) -> np.ndarray
     """CIE XYZ = ∫ S(λ) (x̄, ȳ, z̄) dλ by the trapezoid rule over the given samples (λ in nm, ascending)."""
     wavelengths = _validated_wavelengths(wavelength_nm)
     if wavelengths.ndim != 1 or wavelengths.size < 2 or not np.all(np.diff(wavelengths) > 0.0):
-        raise ValueError("wavelength_nm: must be a 1-D, strictly increasing grid of at least 2 wavelengths")
+        raise InputError("wavelength_nm: must be a 1-D, strictly increasing grid of at least 2 wavelengths")
     weights = cie_cmf(wavelengths) * np.asarray(values, dtype=float)[..., None]
     return np.trapezoid(weights, wavelengths, axis=-2)

@@ -26,6 +26,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from hgcore.errors import InputError
 from hgcore.optics.array_ops import ArrayOps
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import interface_amplitudes, normal_factor
@@ -37,7 +38,7 @@ def gaussian_visibilities(first_visibility: Any, count: int, ops: ArrayOps) -> l
     Built by V_{d+1} = V_d · V_1^{2d+1} so that no powers or logarithms of V_1 are formed.
     """
     if count < 0:
-        raise ValueError(f"count: must be non-negative, got {count}")
+        raise InputError(f"count: must be non-negative, got {count}")
     visibilities: list[Any] = []
     current = first_visibility
     odd_power = first_visibility  # V_1^{2d+1}, starting at d = 0
@@ -130,7 +131,7 @@ def transmission_terms(terms: Sequence[Any]) -> list[Any]:
 def combine_reflectance_terms(terms: Sequence[Any], visibilities: Sequence[Any]) -> Any:
     """R = R_incoherent + 2 Σ_d V_d X_d with V_d = ``visibilities[d−1]`` (as many as there are X_d)."""
     if len(visibilities) != len(terms) - 1:
-        raise ValueError(
+        raise InputError(
             f"visibilities: need {len(terms) - 1} values V_1 … V_{{P−1}}, got {len(visibilities)}"
         )
     reflectance = terms[0]
@@ -169,8 +170,8 @@ def thin_film_reflectance(
 def validate_thin_film(thickness_m: float, film_ior: float, exterior_ior: float) -> None:
     """Scene-level checks of the film constants (the kernels above cannot raise on Dr.Jit arrays)."""
     if not (math.isfinite(thickness_m) and thickness_m >= 0.0):
-        raise ValueError(f"thickness_m: must be a finite length ≥ 0 m, got {thickness_m}")
+        raise InputError(f"thickness_m: must be a finite length ≥ 0 m, got {thickness_m}")
     if not (math.isfinite(film_ior) and film_ior >= 1.0):
-        raise ValueError(f"film_ior: must be a finite real index ≥ 1, got {film_ior}")
+        raise InputError(f"film_ior: must be a finite real index ≥ 1, got {film_ior}")
     if not (math.isfinite(exterior_ior) and exterior_ior >= 1.0):
-        raise ValueError(f"exterior_ior: must be a finite real index ≥ 1, got {exterior_ior}")
+        raise InputError(f"exterior_ior: must be a finite real index ≥ 1, got {exterior_ior}")

@@ -12,6 +12,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from hgcore.errors import InputError
+
 _KEY_SEGMENT = re.compile(r"^[A-Za-z0-9._-]+$")
 
 
@@ -31,7 +33,7 @@ def validate_key(key: str) -> str:
     """Return ``key`` if it is a relative ``/``-path of safe segments (no ``..``), else raise ValueError."""
     segments = key.split("/")
     if not key or any(not _KEY_SEGMENT.match(s) or s in {".", ".."} for s in segments):
-        raise ValueError(f"key: {key!r} is not a relative path of [A-Za-z0-9._-] segments")
+        raise InputError(f"key: {key!r} is not a relative path of [A-Za-z0-9._-] segments")
     return key
 
 

@@ -13,6 +13,7 @@ from typing import Any
 import boto3
 from botocore.exceptions import ClientError
 
+from hgcore.errors import InputError
 from hgcore.store.base import ArtifactInfo, ArtifactNotFoundError, ArtifactStore, validate_key
 
 
@@ -28,7 +29,7 @@ class S3Store(ArtifactStore):
         client: Any | None = None,
     ) -> None:
         if not bucket:
-            raise ValueError("bucket: must be a non-empty S3 bucket name")
+            raise InputError("bucket: must be a non-empty S3 bucket name")
         self.bucket = bucket
         self.prefix = prefix.strip("/") + "/" if prefix.strip("/") else ""
         self.client = client or boto3.client("s3", endpoint_url=endpoint_url, region_name=region)

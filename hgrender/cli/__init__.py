@@ -15,6 +15,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
+from hgcore.artifacts.exr import ArtifactFormatError
+from hgcore.errors import InputError
+
 # Sub-command modules, in help order. A module missing here is simply not offered.
 COMMAND_MODULES: tuple[str, ...] = (
     "hgrender.cli.render",
@@ -74,8 +79,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CliError as error:
         print(f"hgrender {args.command}: error: {error}", file=sys.stderr)
         return 2
-    except ValueError as error:
-        # Domain validation errors (they name the offending parameter) are user errors, not crashes.
+    except (InputError, ValidationError, ArtifactFormatError) as error:
+        # Bad input (it names the offending parameter, setting or file) is the user's to fix: one line,
+        # exit 2. Anything else is a bug and ends with its traceback and exit 1.
         print(f"hgrender {args.command}: error: {error}", file=sys.stderr)
         return 2
 

@@ -11,6 +11,7 @@ import argparse
 import json
 from typing import Any
 
+from hgcore.errors import InputError
 from hgcore.optics.calculator import coherence_at
 from hgcore.optics.sources import SOURCE_KINDS
 
@@ -74,13 +75,13 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(handler=run)
 
 
-def _with_flag_name(error: ValueError) -> ValueError:
+def _with_flag_name(error: InputError) -> InputError:
     """The calculator's error with its leading parameter name replaced by the command-line flag."""
     message = str(error)
     name, separator, rest = message.partition(":")
     flag = _FLAG_FOR_PARAMETER.get(name.split(" ")[0])
     if separator and flag is not None:
-        return ValueError(f"{flag}{name[len(name.split(' ')[0]) :]}:{rest}")
+        return InputError(f"{flag}{name[len(name.split(' ')[0]) :]}:{rest}")
     return error
 
 
@@ -120,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             direction=args.direction,
             modes=args.modes,
         )
-    except ValueError as error:
-        raise _with_flag_name(error) from error
+    except InputError as error:
+        raise _with_flag_name(error) from None
     print(json.dumps(result) if args.json else _format_table(result))
     return 0

@@ -30,7 +30,9 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
+from hgcore.artifacts.exr import ArtifactFormatError
 from hgcore.artifacts.layout import IMAGE_EXR
+from hgcore.errors import InputError
 from hgrender.cli import CliError, read_json_file
 from hgrender.cli.connection import ServiceTarget, add_client_options
 
@@ -125,7 +127,7 @@ def run_suite(
                 result["reasons"] = [f"{entry.key}: no baseline in {baseline} (run with --update-baseline)"]
             if update_baseline:
                 _copy_outputs(current_dir, baseline)
-        except ValueError as error:
+        except (InputError, ArtifactFormatError) as error:  # a bad scene or render outputs; bugs raise
             result["reasons"] = [f"{entry.key}: {error}"]
         results.append(result)
     return results

@@ -4,6 +4,7 @@ plus ``errors`` (a list) for scene and request validation problems."""
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 import redis
@@ -11,12 +12,30 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
+from starlette.requests import ClientDisconnect
 
+from hgcore.errors import InputError
 from hgcore.jobs.records import JobNotFoundError
-from hgcore.store.base import ArtifactNotFoundError
+from hgcore.store.base import ArtifactNotFoundError, validate_key
 from schemas import SceneError
 from service.auth import AuthenticationError, PermissionDeniedError, RateLimitedError
 from service.jobs import JobConflictError
+
+CLIENT_CLOSED_REQUEST = 499
+"""Status recorded when the client hung up before its request body arrived (nginx's convention): a 4xx,
+so a disconnect never counts as a server error in ``/metrics``; nobody receives the response."""
+
+_STORE_PREFIX = re.compile(r"^jobs/[0-9a-f]{32}/")
+
+
+def _artifact_name(key: str) -> str | None:
+    """The user-facing artifact name of a store key or requested name, or None when it is not a safe
+    name (a traversal attempt, say): error messages never echo store layout or arbitrary paths."""
+    name = _STORE_PREFIX.sub("", key)
+    try:
+        return validate_key(name)
+    except ValueError:
+        return None
 
 
 def problem(status_code: int, detail: str, errors: list[Any] | None = None, **headers: str) -> JSONResponse:
@@ -51,8 +70,10 @@ def install_exception_handlers(app: FastAPI) -> None:
         errors = [{k: v for k, v in e.items() if k in {"loc", "msg", "type"}} for e in error.errors()]
         return _validation_problem(errors)
 
-    @app.exception_handler(ValueError)
-    async def value_error(_: Request, error: ValueError) -> JSONResponse:
+    # Bad input names its field (hgcore.errors.InputError): 422. Any other exception, a plain ValueError
+    # included, is a bug: Starlette answers 500 and the server logs its traceback.
+    @app.exception_handler(InputError)
+    async def input_error(_: Request, error: InputError) -> JSONResponse:
         return problem(422, str(error))
 
     @app.exception_handler(AuthenticationError)
@@ -73,7 +94,12 @@ def install_exception_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(ArtifactNotFoundError)
     async def artifact_not_found(_: Request, error: ArtifactNotFoundError) -> JSONResponse:
-        return problem(404, f"name: no artifact {error.args[0]!r}")
+        name = _artifact_name(str(error.args[0]) if error.args else "")
+        return problem(404, f"name: no artifact {name!r}" if name else "name: no such artifact")
+
+    @app.exception_handler(ClientDisconnect)
+    async def client_disconnected(_: Request, error: ClientDisconnect) -> JSONResponse:
+        return problem(CLIENT_CLOSED_REQUEST, "body: the client closed the connection mid-request")
 
     @app.exception_handler(JobConflictError)
     async def conflict(_: Request, error: JobConflictError) -> JSONResponse:

@@ -14,6 +14,8 @@ from typing import Any, Literal
 from croniter import croniter
 from pydantic import BaseModel, ConfigDict, Field, HttpUrl, field_validator, model_validator
 
+from hgcore.errors import InputError
+
 SCENE_NAME_PATTERN = r"^[A-Za-z0-9._-]{1,100}$"
 
 
@@ -65,10 +67,10 @@ class SuiteScene(BaseModel):
     def _one_source(self) -> SuiteScene:
         sources = [s for s in (self.example, self.job_id, self.scene) if s is not None]
         if len(sources) != 1:
-            raise ValueError("example: give exactly one of example, job_id or scene")
+            raise InputError("example: give exactly one of example, job_id or scene")
         if self.name is None:
             if self.example is None:
-                raise ValueError("name: required unless the scene is an example")
+                raise InputError("name: required unless the scene is an example")
             self.name = self.example
         return self
 
@@ -93,7 +95,7 @@ class Suite(BaseModel):
         names = [scene.key for scene in scenes]
         duplicates = sorted({name for name in names if names.count(name) > 1})
         if duplicates:
-            raise ValueError(f"scenes: duplicate scene names {duplicates}")
+            raise InputError(f"scenes: duplicate scene names {duplicates}")
         return scenes
 
     def thresholds_for(self, scene: SuiteScene) -> Thresholds:
@@ -135,7 +137,7 @@ class ScheduleCreate(BaseModel):
     @classmethod
     def _valid_cron(cls, value: str | None) -> str | None:
         if value is not None and (len(value.split()) != 5 or not croniter.is_valid(value)):
-            raise ValueError(f"cron: {value!r} is not a valid 5-field cron expression")
+            raise InputError(f"cron: {value!r} is not a valid 5-field cron expression")
         return value
 
     @field_validator("timezone")
@@ -144,13 +146,13 @@ class ScheduleCreate(BaseModel):
         try:
             zoneinfo.ZoneInfo(value)
         except (zoneinfo.ZoneInfoNotFoundError, ValueError):
-            raise ValueError(f"timezone: {value!r} is not an IANA time zone") from None
+            raise InputError(f"timezone: {value!r} is not an IANA time zone") from None
         return value
 
     @model_validator(mode="after")
     def _cron_or_interval(self) -> ScheduleCreate:
         if (self.cron is None) == (self.interval_s is None):
-            raise ValueError("cron: give exactly one of cron or interval_s")
+            raise InputError("cron: give exactly one of cron or interval_s")
         return self
 
 
@@ -264,7 +266,7 @@ class PromoteRequest(BaseModel):
     @model_validator(mode="after")
     def _job_or_run(self) -> PromoteRequest:
         if (self.job_id is None) == (self.run_id is None):
-            raise ValueError("job_id: give exactly one of job_id (with scene) or run_id")
+            raise InputError("job_id: give exactly one of job_id (with scene) or run_id")
         if self.job_id is not None and self.scene is None:
-            raise ValueError("scene: required with job_id")
+            raise InputError("scene: required with job_id")
         return self

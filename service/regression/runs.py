@@ -24,6 +24,7 @@ from rq import Queue, get_current_job
 from rq.job import Dependency
 
 from hgcore.artifacts.keys import artifact_key
+from hgcore.errors import InputError
 from hgcore.jobs.queue_graph import merge_rq_id
 from hgcore.jobs.status import JobStatus
 from hgcore.settings import Settings
@@ -53,11 +54,11 @@ def resolve_scene(
     if entry.example is not None:
         path = EXAMPLES_DIR / f"{entry.example}.json"
         if not path.is_file():
-            raise ValueError(f"example: {entry.example!r} is not a file of schemas/examples")
+            raise InputError(f"example: {entry.example!r} is not a file of schemas/examples")
         scene = json.loads(path.read_text())
     elif entry.job_id is not None:
         if job_scene is None:
-            raise ValueError(f"job_id: scene {entry.key!r} names a job; that needs the service")
+            raise InputError(f"job_id: scene {entry.key!r} names a job; that needs the service")
         scene = job_scene(entry.job_id)
     else:
         assert entry.scene is not None

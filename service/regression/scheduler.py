@@ -37,6 +37,7 @@ from apscheduler.triggers.cron import CronTrigger
 from apscheduler.triggers.interval import IntervalTrigger
 from redis.connection import parse_url
 
+from hgcore.errors import InputError
 from hgcore.redis_clients import redis_client
 from hgcore.settings import Settings
 from service.regression.models import ScheduleView
@@ -134,7 +135,7 @@ class RegressionScheduler:
 
     def __init__(self, settings: Settings, name: str | None = None) -> None:
         if not settings.redis_url:
-            raise ValueError("redis_url: the scheduler needs the deployment's Redis (REDIS_URL)")
+            raise InputError("redis_url: the scheduler needs the deployment's Redis (REDIS_URL)")
         self.settings = settings
         self.name = name or f"scheduler-{uuid.uuid4().hex[:8]}"
         self.client = redis_client(settings.redis_url)

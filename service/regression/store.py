@@ -23,6 +23,7 @@ import redis
 
 from hgcore.artifacts.keys import job_prefix
 from hgcore.artifacts.layout import IMAGE_EXR, SUMMARY_JSON, VARIANCE_EXR
+from hgcore.errors import InputError
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 from service.regression.models import BaselineList, BaselineView, RunView, ScheduleCreate, ScheduleView
 
@@ -142,7 +143,7 @@ class RegressionStore:
         available = {info.key.removeprefix(source) for info in self.store.list(source)}
         missing = [name for name in BASELINE_FILES if name not in available]
         if missing:
-            raise ValueError(f"job_id: job {job_id} has no {', '.join(missing)} (not a finished render)")
+            raise InputError(f"job_id: job {job_id} has no {', '.join(missing)} (not a finished render)")
         version = int(self.client.hincrby(_BASELINE_KEY.format(scene), "next", 1))
         for name in BASELINE_FILES:
             self.store.put_bytes(baseline_prefix(scene, version) + name, self.store.get_bytes(source + name))

@@ -5,7 +5,7 @@ where kubectl is not installed; the raw YAML is parsed with PyYAML regardless), 
 Kubernetes OpenAPI schemas (kubernetes-validate) and checked: required fields, one hgrender image, probes
 on /readyz and /healthz, resources, non-root security contexts, the worker's termination grace against
 its shutdown grace, KEDA triggers on RQ's queue lists, selectors that select something, and every
-environment variable name known to ``Settings`` / ``SceneLimits``.
+environment variable name known to ``Settings`` (which includes ``SceneLimits``).
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ import yaml
 
 from hgcore.settings import QUEUE_NAMES, Settings
 from hgrender.cli import build_parser
-from schemas.limits import SceneLimits
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEPLOY_DIR = REPO_ROOT / "deploy"
@@ -46,7 +45,7 @@ WORKLOAD_KINDS = ("Deployment", "StatefulSet")
 def known_env_names() -> set[str]:
     """Environment names of every setting (the rows of docs/configuration.md's table)."""
     names = {"REDIS_URL" if n == "redis_url" else f"HGRENDER_{n.upper()}" for n in Settings.model_fields}
-    return names | {f"HGRENDER_{n.upper()}" for n in SceneLimits.model_fields}
+    return names
 
 
 def kustomize(tmp_path: Path, resources: list[str], components: list[str]) -> list[dict[str, Any]]:
@@ -390,7 +389,7 @@ def test_dockerfile_install_step_builds_from_the_copied_files_only(tmp_path: Pat
         timeout=120,
     )
     assert built.returncode == 0, built.stderr
-    for module in ("hgrender/cli/__init__.py", "service/main.py", "worker/tasks.py", "schemas/limits.py"):
+    for module in ("hgrender/cli/__init__.py", "service/main.py", "worker/tasks.py", "hgcore/settings.py"):
         assert (build_lib / module).is_file(), module
     assert list((build_lib / "schemas" / "examples").glob("*.json"))
     (entry_points,) = egg_base.glob("*.egg-info/entry_points.txt")

@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from schemas import SceneError, SceneLimits, validate_scene
+from hgcore.settings import SceneLimits
+from schemas import SceneError, validate_scene
 from schemas.procedural import generate_mesh, mesh_size
 from schemas.scene import OpticalDiscShape, ShellShape
 

@@ -15,7 +15,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from schemas import EXAMPLES_DIR, SceneError, SceneLimits, validate_scene, validate_scene_json
+from hgcore.settings import SceneLimits
+from schemas import EXAMPLES_DIR, SceneError, validate_scene, validate_scene_json
 from schemas.export import SCHEMA_PATH, render_schema_text, scene_json_schema
 from schemas.scene import GratingMaterial, PerspectiveCamera, Transform
 

@@ -17,7 +17,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
-from schemas import EXAMPLES_DIR, Scene, SceneError, SceneLimits, validate_scene
+from hgcore.settings import SceneLimits
+from schemas import EXAMPLES_DIR, Scene, SceneError, validate_scene
 from schemas.mesh_files import load_scene_meshes, read_mesh_file
 from schemas.usd_export import scene_to_usd
 from schemas.usd_import import import_usd_isolated

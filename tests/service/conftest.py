@@ -146,3 +146,26 @@ def wait_for(predicate: Callable[[], Any], timeout_s: float, what: str, interval
 def http_get(service: LiveService, path: str, token: str | None = None) -> httpx.Response:
     headers = {"Authorization": f"Bearer {token}"} if token else {}
     return httpx.get(service.base_url + path, headers=headers, timeout=30)
+
+
+def parent_of(pid: int) -> int | None:
+    """The parent pid of process ``pid`` (Linux /proc), None if it is gone."""
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def children_of(pid: int) -> list[int]:
+    """Pids of the live child processes of ``pid``."""
+    return [
+        int(p.name) for p in Path("/proc").iterdir() if p.name.isdigit() and parent_of(int(p.name)) == pid
+    ]
+
+
+def is_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False

@@ -191,8 +191,13 @@ def test_rate_limit_answers_429(live_service: LiveService) -> None:
 
 def test_health_readiness_metrics_schema(live_service: LiveService) -> None:
     assert http_get(live_service, "/healthz").json() == {"status": "ok"}
-    ready = http_get(live_service, "/readyz").json()
-    assert ready == {"status": "ok", "checks": {"redis": "ok", "store": "ok"}}
+    ready = http_get(live_service, "/readyz")  # no worker runs in these tests: not ready
+    assert ready.status_code == 503
+    assert ready.json()["checks"] == {
+        "redis": "ok",
+        "workers": "error: no queue worker is alive",
+        "store": "ok",
+    }
     metrics = http_get(live_service, "/metrics").text
     assert 'hgrender_queue_depth{queue="default"}' in metrics
     assert 'hgrender_jobs{status="queued"}' in metrics

@@ -8,13 +8,12 @@ import re
 import yaml
 
 from hgcore.settings import Settings
-from schemas.limits import SceneLimits
 from tests.service.conftest import REPO_ROOT
 
 
 def settings_env_names() -> set[str]:
     names = {"REDIS_URL" if n == "redis_url" else f"HGRENDER_{n.upper()}" for n in Settings.model_fields}
-    return names | {f"HGRENDER_{n.upper()}" for n in SceneLimits.model_fields}
+    return names  # Settings includes SceneLimits' fields
 
 
 def test_compose_services_and_environment() -> None:

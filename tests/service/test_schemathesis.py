@@ -46,6 +46,9 @@ def test_responses_conform_to_the_openapi_document(live_service: LiveService, tm
         f"{live_service.base_url}/openapi.json",
         "--checks",
         ",".join(CHECKS),
+        # /readyz answers 503 by design here: these tests run no queue worker, so the service is not ready.
+        "--exclude-path",
+        "/readyz",
         "--max-examples",
         "8",
         "--phases",

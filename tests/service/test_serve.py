@@ -3,6 +3,7 @@ and the CLI client commands against it."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -16,14 +17,17 @@ import pytest
 
 from hgrender.cli import main as hgrender_main
 from hgrender.client import HgrenderClient
-from service.redis_server import free_loopback_port
-from tests.service.conftest import EXAMPLES_DIR, tiny_scene, wait_for
+from service.redis_server import free_loopback_port, servers_working_in
+from tests.service.conftest import EXAMPLES_DIR, children_of, is_alive, tiny_scene, wait_for
 
 pytestmark = pytest.mark.slow
 
 
-def start_serve(data_dir: Path, port: int, workers: int) -> subprocess.Popen[bytes]:
+def start_serve(
+    data_dir: Path, port: int, workers: int, extra_env: dict[str, str] | None = None
+) -> subprocess.Popen[bytes]:
     env = {k: v for k, v in os.environ.items() if k != "REDIS_URL" and not k.startswith("HGRENDER_")}
+    env |= extra_env or {}
     command = [
         sys.executable,
         "-c",
@@ -36,16 +40,18 @@ def start_serve(data_dir: Path, port: int, workers: int) -> subprocess.Popen[byt
         "--workers",
         str(workers),
     ]
-    log = (data_dir.parent / f"serve-{port}.log").open("wb")
+    log = (data_dir.parent / f"serve-{port}.log").open("ab")
     process = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
 
     def ready() -> bool:
         if process.poll() is not None:
             pytest.fail(f"hgrender serve exited: {(data_dir.parent / f'serve-{port}.log').read_text()}")
         try:
-            return httpx.get(f"http://127.0.0.1:{port}/readyz", timeout=1).status_code == 200
+            response = httpx.get(f"http://127.0.0.1:{port}/readyz", timeout=1)
         except httpx.HTTPError:
             return False
+        # Without workers the service never becomes ready; its API answering is what this waits for.
+        return response.status_code == 200 or (workers == 0 and response.json()["checks"]["redis"] == "ok")
 
     wait_for(ready, 60, "hgrender serve to become ready", interval_s=0.2)
     return process
@@ -111,15 +117,34 @@ def test_serve_restart_keeps_queued_jobs_and_cli_works(
 
 def redis_servers_in(directory: Path) -> list[int]:
     """PIDs of redis-server processes working in ``directory``."""
-    pids = []
-    for proc in Path("/proc").iterdir():
-        try:
-            if (
-                proc.name.isdigit()
-                and (proc / "comm").read_text().strip() == "redis-server"
-                and Path(os.readlink(proc / "cwd")) == directory.resolve()
-            ):
-                pids.append(int(proc.name))
-        except OSError:  # the process ended meanwhile
-            continue
-    return pids
+    return servers_working_in(directory)
+
+
+def test_a_sigkilled_serve_leaves_no_worker_and_its_redis_is_replaced(tmp_path: Path) -> None:
+    """Workers shut down when their `serve` dies; the Redis it leaves behind is stopped by the next
+    `serve` on the same data dir before it starts its own (one AOF, one writer), and the jobs live on."""
+    data_dir = tmp_path / "data"
+    port = free_loopback_port()
+    first = start_serve(data_dir, port, workers=1)
+    workers = [p for p in children_of(first.pid) if b"worker" in Path(f"/proc/{p}/cmdline").read_bytes()]
+    assert len(workers) == 1
+    token = (data_dir / "admin.token").read_text().strip()
+    with HgrenderClient(f"http://127.0.0.1:{port}", token) as client:
+        job_id = client.submit(tiny_scene(), chunks=2)["id"]
+    (old_redis,) = redis_servers_in(data_dir / "redis")
+    first.kill()
+    first.wait()
+    second = None
+    try:
+        wait_for(lambda: not any(is_alive(p) for p in workers), 30, "the orphaned worker to shut down")
+        second = start_serve(data_dir, port, workers=1)
+        assert not is_alive(old_redis)
+        assert len(redis_servers_in(data_dir / "redis")) == 1
+        with HgrenderClient(f"http://127.0.0.1:{port}", token) as client:
+            assert client.wait(job_id, timeout_s=120)["status"] == "succeeded"
+    finally:
+        if second is not None:
+            stop_serve(second)
+        for pid in [*workers, *redis_servers_in(data_dir / "redis")]:  # whatever a failure left behind
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)

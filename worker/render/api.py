@@ -22,6 +22,7 @@ from hgcore.artifacts.images import (
 )
 from hgcore.artifacts.layout import SUMMARY_JSON, BandLayout
 from hgcore.artifacts.pixel_sums import PixelSums, read_partial, write_partial
+from hgcore.errors import InputError
 from schemas.scene import Scene
 from schemas.validation import validate_scene
 from worker.render.renderer import Renderer
@@ -40,9 +41,9 @@ class ChunkSpec:
 def plan_chunks(total_spp: int, chunk_count: int, base_seed: int) -> list[ChunkSpec]:
     """Split ``total_spp`` into ``chunk_count`` chunks (≥ 1 spp each) with distinct seeds."""
     if total_spp < 1:
-        raise ValueError(f"spp: must be at least 1, got {total_spp}")
+        raise InputError(f"spp: must be at least 1, got {total_spp}")
     if chunk_count < 1:
-        raise ValueError(f"chunks: must be at least 1, got {chunk_count}")
+        raise InputError(f"chunks: must be at least 1, got {chunk_count}")
     chunk_count = min(chunk_count, total_spp)
     base, extra = divmod(total_spp, chunk_count)
     return [
@@ -146,7 +147,7 @@ def merge_chunks(
 ) -> dict[str, Any]:
     """Add the chunks' sums and write image.exr, variance.exr, preview.png and summary.json."""
     if not chunk_paths:
-        raise ValueError("chunk_paths: at least one chunk is needed")
+        raise InputError("chunk_paths: at least one chunk is needed")
     chunk_sums, render_seconds = load_chunks(sorted(chunk_paths, key=lambda p: str(p)))
     return write_merged(scene, chunk_sums, render_seconds, out_dir, extra_summary=extra_summary)
 
@@ -163,7 +164,7 @@ def write_merged(
     ``render_seconds``: the chunks' render time, summed."""
     parsed = as_scene(scene)
     if not chunk_sums:
-        raise ValueError("chunk_sums: at least one chunk is needed")
+        raise InputError("chunk_sums: at least one chunk is needed")
     total = chunk_sums[0]
     for sums in chunk_sums[1:]:
         total = total.add(sums)

@@ -12,17 +12,4 @@ from hgcore.optics.array_ops import ArrayOps
 
 def drjit_ops() -> ArrayOps:
     """The Dr.Jit namespace, for the optics formulas inside the integrator's kernels."""
-    return ArrayOps(
-        name="drjit",
-        exp=dr.exp,
-        log=dr.log,
-        sqrt=dr.sqrt,
-        sin=dr.sin,
-        cos=dr.cos,
-        atan2=dr.atan2,
-        abs=dr.abs,
-        minimum=dr.minimum,
-        maximum=dr.maximum,
-        where=dr.select,
-        floor=dr.floor,
-    )
+    return ArrayOps.of("drjit", dr, atan2=dr.atan2, where=dr.select)

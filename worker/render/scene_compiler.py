@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from hgcore.artifacts.layout import BandLayout
+from hgcore.errors import InputError
 from hgcore.optics import ior as ior_data
 from hgcore.optics.grating import BinaryGrating
 from hgcore.optics.rough_surface import RoughSurface
@@ -189,7 +190,7 @@ class SceneCompiler:
                 max_order=max(material.max_order, 1),
             )
             return mat.MaterialRecord(mat.MaterialKind.GRATING, values, grating), placeholder
-        raise ValueError(f"materials: type {kind!r} is not supported by the renderer")
+        raise InputError(f"materials: type {kind!r} is not supported by the renderer")
 
     def _mitsuba_spectrum(self, spectrum: Any, clip: bool = False) -> dict[str, Any]:
         wavelengths = np.arange(300.0, 1000.0 + EMITTER_SPECTRUM_STEP_NM, EMITTER_SPECTRUM_STEP_NM)
@@ -231,16 +232,16 @@ class SceneCompiler:
             return self._inline_mesh(shape)
         if kind == "mesh_file":
             if self.bundle_dir is None:
-                raise ValueError(f"shapes: mesh file {shape.path!r} needs an uploaded bundle")
+                raise InputError(f"shapes: mesh file {shape.path!r} needs an uploaded bundle")
             path = (self.bundle_dir / shape.path).resolve()
             if self.bundle_dir.resolve() not in path.parents:
-                raise ValueError(f"shapes: mesh file {shape.path!r} escapes the bundle")
+                raise InputError(f"shapes: mesh file {shape.path!r} escapes the bundle")
             return {
                 "type": path.suffix.lstrip(".").lower(),
                 "filename": str(path),
                 "to_world": _compose(mi, shape.transform, None),
             }
-        raise ValueError(f"shapes: type {kind!r} is not supported by the renderer")
+        raise InputError(f"shapes: type {kind!r} is not supported by the renderer")
 
     def _inline_mesh(self, shape: Any) -> Any:
         """An ``mi.Mesh`` of an inline or procedural mesh, the shape's transform applied to its vertices.
@@ -328,7 +329,7 @@ class SceneCompiler:
             own = _frame_matrix(emitter.center_m, emitter.normal, None, emitter.radius_m, emitter.radius_m)
             shape = {"type": "disk", "to_world": self.mi.ScalarTransform4f(own)}
             return shape, record, math.pi * emitter.radius_m**2
-        raise ValueError(f"emitters: type {kind!r} is not supported by the renderer")
+        raise InputError(f"emitters: type {kind!r} is not supported by the renderer")
 
     def _radiance(self, emitter: Any, area_m2: float, film: model.Film) -> dict[str, Any]:
         wavelengths = np.arange(200.0, 2500.0 + EMITTER_SPECTRUM_STEP_NM, EMITTER_SPECTRUM_STEP_NM)
@@ -337,7 +338,7 @@ class SceneCompiler:
             inside = (wavelengths >= film.wavelength_min_nm) & (wavelengths <= film.wavelength_max_nm)
             integral = float(np.trapezoid(values[inside], wavelengths[inside]))
             if integral <= 0:
-                raise ValueError("emitters: spectrum integrates to zero over the film's wavelength range")
+                raise InputError("emitters: spectrum integrates to zero over the film's wavelength range")
             scale = emitter.power_w / (math.pi * area_m2 * integral)
         else:
             scale = emitter.radiance_scale

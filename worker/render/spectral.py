@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hgcore.errors import InputError
+
 GRID_MIN_NM = 200.0
 GRID_MAX_NM = 2500.0
 GRID_STEP_NM = 5.0
@@ -36,9 +38,9 @@ class SpectralTable:
         """Register a spectrum sampled on ``grid_wavelengths_nm()``; identical spectra share one id."""
         row = np.asarray(values_on_grid, dtype=np.float32)
         if row.shape != (GRID_SIZE,):
-            raise ValueError(f"spectrum: expected {GRID_SIZE} grid samples, got shape {row.shape}")
+            raise InputError(f"spectrum: expected {GRID_SIZE} grid samples, got shape {row.shape}")
         if not np.all(np.isfinite(row)):
-            raise ValueError("spectrum: values must be finite")
+            raise InputError("spectrum: values must be finite")
         key = row.tobytes()
         if key not in self._index:
             self._index[key] = len(self._rows)

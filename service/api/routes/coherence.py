@@ -23,6 +23,7 @@ class CoherenceRequest(BaseModel):
 
     model_config = ConfigDict(
         extra="forbid",
+        allow_inf_nan=False,
         json_schema_extra={
             "examples": [{"source": "sphere", "radius_m": 0.01, "distance_m": 2.0, "wavelength_nm": 550.0}]
         },

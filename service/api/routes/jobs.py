@@ -12,11 +12,11 @@ from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 
 from hgcore.artifacts.keys import job_prefix
-from hgcore.jobs.records import JobNotFoundError
+from hgcore.errors import InputError
 from hgcore.jobs.status import JobStatus
 from hgcore.jobs.views import JobView
-from hgcore.store.base import validate_key
-from schemas import SceneLimits
+from hgcore.settings import SceneLimits
+from hgcore.store.base import ArtifactNotFoundError, validate_key
 from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
 from service.events import job_events
 from service.models import (
@@ -63,16 +63,16 @@ async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str,
         form = await request.form(max_files=1, max_fields=16)
         upload = form.get("scene")
         if not isinstance(upload, UploadFile):
-            raise ValueError("scene: multipart requests need a file field 'scene'")
+            raise InputError("scene: multipart requests need a file field 'scene'")
         fields = {k: v for k, v in form.items() if k != "scene" and isinstance(v, str)}
-        options = JobOptions.model_validate(fields)  # lax mode: form strings → ints
+        options = JobOptions.model_validate(fields, strict=False)  # form fields are text: '4' → 4
         content = await upload.read()
         scene, files = await run_in_threadpool(
             scene_from_upload, upload.filename or "", content, options, limits
         )
         return scene, files, options
     if not content_type.startswith("application/json"):
-        raise ValueError("content-type: send application/json or multipart/form-data")
+        raise InputError("content-type: send application/json or multipart/form-data")
     body = JobCreate.model_validate_json(await request.body())
     options = JobOptions.model_validate(body.model_dump(exclude={"scene"}))
     scene = await run_in_threadpool(scene_from_json, body.scene, options, limits)
@@ -256,7 +256,7 @@ def download_artifact(
     try:
         key = validate_key(job_prefix(job_id) + name)
     except ValueError:
-        raise JobNotFoundError(f"{job_id}/{name}") from None
+        raise ArtifactNotFoundError(name) from None  # reported without echoing the name
     media_type = _MEDIA_TYPES.get("." + name.rsplit(".", 1)[-1].lower(), "application/octet-stream")
     # Streamed from one open handle: an artifact replaced meanwhile (atomic rename) is sent whole, old
     # or new, never a mix (a separate stat for Content-Length could disagree with the bytes sent).

@@ -49,7 +49,9 @@ _IMAGE_ERRORS: dict[int | str, dict[str, Any]] = {
     422: {"model": Problem, "description": "Invalid parameter."},
 }
 _RAW = {200: {"content": {"application/octet-stream": {}}, "description": "Little-endian floats."}}
-ExposureEV = Annotated[float, Query(ge=-64, le=64, description="Exposure in stops: linear × 2^ev.")]
+ExposureEV = Annotated[
+    float, Query(ge=-64, le=64, allow_inf_nan=False, description="Exposure in stops: linear × 2^ev.")
+]
 ToneMap = Annotated[str, Query(pattern=f"^({'|'.join(TONE_MAPS)})$", description="clamp, reinhard or aces.")]
 
 
