@@ -22,6 +22,7 @@ BOX_HALF_SIZE_M = 3.0
 WALLS = [  # (centre axis, sign): the wall at sign·half-size along that axis, emitting inwards
     (axis, sign) for axis in range(3) for sign in (-1.0, 1.0)
 ]
+WALL_RADIANCE = 1.0  # per band: a constant spectrum of 1 at radiance_scale 1 (the walls' pixels read it)
 
 
 def _wall(axis: int, sign: float) -> dict[str, Any]:
@@ -40,7 +41,7 @@ def _wall(axis: int, sign: float) -> dict[str, Any]:
         "width_m": side,
         "height_m": side,
         "spectrum": {"type": "constant", "value": 1.0},
-        "radiance_scale": 1.0,
+        "radiance_scale": WALL_RADIANCE,
     }
 
 
@@ -89,9 +90,8 @@ def furnace_ratio(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> tuple[
     mask = image["depth"] < 2.5
     assert mask.sum() >= 20, "the object covers too few pixels"
     values = np.mean([image[name][mask] for name in bands], axis=0)
-    walls = float(np.mean([image[name][~mask] for name in bands]))
     error = float(np.std(values, ddof=1) / math.sqrt(values.size))
-    return float(values.mean()) / walls, error / walls
+    return float(values.mean()) / WALL_RADIANCE, error / WALL_RADIANCE
 
 
 def box(half_extents_m: tuple[float, float, float]) -> dict[str, Any]:
