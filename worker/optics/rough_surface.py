@@ -129,8 +129,12 @@ def propagating_fraction(
     ops: ArrayOps,
     exterior_ior: Any = 1.0,
     exit_ior: Any = 1.0,
+    reflection: bool = False,
 ) -> Any:
     """P = ∫ S d²f over the frequencies that propagate after scattering (dimensionless, in [0, 1]).
+
+    ``reflection``: n_o = n_i, so the disk always contains 0 (t₋ < 0) and the cheaper one-sided form with
+    constant angles is used (a quarter of the work: this runs per wavelength at every rough vertex).
 
     In the frequency plane the propagating set is the disk |f − c| < ρ, c = n_i β_i/λ (|c| = n_i sin θ_i/λ),
     ρ = n_o/λ (n_o = n_i for reflection, n_t for transmission: |β_o| < 1). S is rotationally symmetric about
@@ -144,6 +148,13 @@ def propagating_fraction(
     """
     centre = exterior_ior * sin_theta_i / wavelength_m
     radius = exit_ior / wavelength_m
+    if reflection:
+        total_reflection: Any = 0.0
+        for fraction, weight in zip(_ANGLE_FRACTIONS, _ANGLE_WEIGHTS, strict=True):
+            along = centre * math.cos(math.pi * fraction)
+            root = ops.sqrt(ops.maximum(radius * radius - centre * centre + along * along, 0.0))
+            total_reflection = total_reflection + weight * radial_cdf(surface, along + root, ops)
+        return total_reflection
     outside = centre > radius
     gap = ops.sqrt(ops.maximum(centre * centre - radius * radius, 0.0))
     angle_max = ops.where(outside, ops.atan2(radius, gap), math.pi)
@@ -158,6 +169,24 @@ def propagating_fraction(
         lower = radial_cdf(surface, ops.maximum(along - root, 0.0), ops)
         total = total + weight * jacobian * ops.where(discriminant > 0.0, upper - lower, 0.0)
     return total
+
+
+# Grid of ``reflection_fraction_table``: sin θ = 1 − (1 − x)² (dense near grazing, where P changes fastest)
+# on 65 nodes of x, and vacuum wavelengths on 36 nodes over 300–1000 nm.
+TABLE_ANGLE_NODES = 65
+TABLE_WAVELENGTHS_M = np.linspace(300e-9, 1000e-9, 36)
+
+
+def reflection_fraction_table(surface: RoughSurface) -> np.ndarray:
+    """P of reflection in air (n_i = n_o = 1) on the (x, λ) grid, shape (angles, wavelengths), for kernels
+    that interpolate it bilinearly instead of integrating per sample (tests bound the interpolation
+    error against :func:`propagating_fraction`)."""
+    from worker.optics.array_ops import NUMPY
+
+    x = np.linspace(0.0, 1.0, TABLE_ANGLE_NODES)
+    sin_theta = 1.0 - (1.0 - x) ** 2
+    grid_sin, grid_wavelength = np.meshgrid(sin_theta, TABLE_WAVELENGTHS_M, indexing="ij")
+    return np.asarray(propagating_fraction(surface, grid_sin, grid_wavelength, NUMPY, reflection=True))
 
 
 def roughness_exponent(
@@ -224,13 +253,18 @@ def rough_reflection_eval(
     reflectance: Any,
     ops: ArrayOps,
     exterior_ior: float = 1.0,
+    fraction: Any = None,
 ) -> Any:
     """Scattered BRDF f_r [1/sr] (without cos θ_o), renormalised over the propagating frequencies;
-    ``reflectance`` is F(θ_i). 0 below the horizon."""
+    ``reflectance`` is F(θ_i). 0 below the horizon. ``fraction``: P if the caller has it (a kernel's lookup
+    table of :func:`propagating_fraction`), else it is computed."""
     g = roughness_exponent(surface.rms_height_m, wi[2], wavelength_m, exterior_ior)
     density = _lobe_density_beta(surface, wi, wo, wavelength_m, exterior_ior, exterior_ior, ops)
-    sin_i = ops.sqrt(ops.maximum(wi[0] * wi[0] + wi[1] * wi[1], 0.0))
-    fraction = propagating_fraction(surface, sin_i, wavelength_m, ops, exterior_ior, exterior_ior)
+    if fraction is None:
+        sin_i = ops.sqrt(ops.maximum(wi[0] * wi[0] + wi[1] * wi[1], 0.0))
+        fraction = propagating_fraction(
+            surface, sin_i, wavelength_m, ops, exterior_ior, exterior_ior, reflection=True
+        )
     value = reflectance * (1.0 - ops.exp(-g)) * density / ops.maximum(fraction, 1e-12)
     return ops.where((wi[2] > 0.0) & (wo[2] > 0.0), value, 0.0)
 

@@ -76,6 +76,7 @@ class MaterialKernels:
         self.kinds = materials.kinds
         self.max_beams = max(materials.max_beams(), 2)
         self.visibility = visibility  # (coherence, separation_world_m, wavelengths) -> Spectrum μ
+        self._fraction_tables: dict[int, tuple[rough_surface.RoughSurface, Any]] = {}
 
     # ---------------------------------------------------------------- parameters
     def param(self, material: Any, offset: int) -> Any:
@@ -364,14 +365,45 @@ class MaterialKernels:
         value = mi.Spectrum(0.0)
         pdf_sum = mi.Float(0.0)
         light, view = _vec(wo), _vec(wi)
+        sin_view = dr.sqrt(dr.maximum(wi.x * wi.x + wi.y * wi.y, 0.0))
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
+            fraction = self._reflection_fraction(surface, sin_view, wavelengths[j])
             brdf = rough_surface.rough_reflection_eval(
-                surface, view, light, wavelength_m, reflectance[j], OPS
+                surface, view, light, wavelength_m, reflectance[j], OPS, fraction=fraction
             )
             value[j] = brdf * wo.z
             pdf_sum += rough_surface.rough_reflection_pdf(surface, view, light, wavelength_m, OPS)
         return value, pdf_sum / len(wavelengths)
+
+    def _reflection_fraction(
+        self, surface: rough_surface.RoughSurface, sin_theta: Any, wavelength_nm: Any
+    ) -> Any:
+        """Propagating fraction P of reflection in air, bilinear in ``reflection_fraction_table`` (built once
+        per surface): 4 gathers instead of a 32-node angular integral per wavelength and sample."""
+        mi = self.mi
+        key = id(surface)
+        if key not in self._fraction_tables:
+            table = rough_surface.reflection_fraction_table(surface).ravel()
+            self._fraction_tables[key] = (surface, mi.Float(table))
+        table = self._fraction_tables[key][1]
+        columns = len(rough_surface.TABLE_WAVELENGTHS_M)
+        first = float(rough_surface.TABLE_WAVELENGTHS_M[0]) * 1e9
+        last = float(rough_surface.TABLE_WAVELENGTHS_M[-1]) * 1e9
+        # Invert sin θ = 1 − (1 − x)², then cell coordinates along both axes.
+        x = 1.0 - dr.sqrt(dr.maximum(1.0 - sin_theta, 0.0))
+        rows = rough_surface.TABLE_ANGLE_NODES
+        row_f = dr.clip(x * (rows - 1), 0.0, rows - 1.001)
+        column_f = dr.clip((wavelength_nm - first) / (last - first) * (columns - 1), 0.0, columns - 1.001)
+        row, column = mi.UInt32(row_f), mi.UInt32(column_f)
+        a, b = row_f - mi.Float(row), column_f - mi.Float(column)
+
+        def at(r: Any, c: Any) -> Any:
+            return dr.gather(mi.Float, table, r * columns + c)
+
+        top = at(row, column) * (1.0 - b) + at(row, column + 1) * b
+        bottom = at(row + 1, column) * (1.0 - b) + at(row + 1, column + 1) * b
+        return top * (1.0 - a) + bottom * a
 
     def film_terms(self, material: Any, cos_i: Any, wavelengths: Any) -> list[Any]:
         """[R_incoherent, X_1 … X_{P−1}] per wavelength (``combine_film_terms``) at incidence cos_i."""
