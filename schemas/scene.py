@@ -649,7 +649,7 @@ class DielectricMaterial(StrictModel):
 class _RoughSurface(_ScatteringMaterial):
     """Statistical rough surface (Eq. 15): RMS height, correlation length and PSD model.
 
-    ``gaussian``: PSD ∝ exp(−(π·ℓ·f)²); ``abc``: PSD ∝ (1 + (ℓ·f)²)^(−psd_exponent/2) (K-correlation).
+    ``gaussian``: PSD ∝ exp(−(π·ℓ·f)²); ``abc`` (K-correlation): PSD ∝ (1 + (2π·ℓ·f)²)^(−(psd_exponent+1)/2).
     """
 
     roughness_rms_um: Annotated[float, Field(gt=0.0, le=100.0)]

@@ -7,12 +7,19 @@ f = φ⊥/2π = n_i(β_o + β_i)/λ with λ the vacuum wavelength (m) and n_i th
 ∫ S d²f = 1.
 
 Harvey partition (Harvey 2012; Krywonos 2006): a fraction e^{−g} of the Fresnel-reflected power stays in the
-specular (delta) lobe, g = (4π σ_h n_i cos θ_i / λ)² (σ_h the RMS height, m), and the rest is scattered:
+specular (delta) lobe, g = (4π σ_h n_i cos θ_i / λ)² (σ_h the RMS height, m), and the rest is scattered.
+Generalised Harvey–Shack renormalisation (Krywonos 2006, §4): the scattered power F(1 − e^{−g}) is shared
+among the *propagating* frequencies only — the part of the PSD beyond the horizon (|β_o| ≥ 1) is
+evanescent, carries no power, and must not take any away — so the lobe is divided by the propagating
+fraction P(θ_i, λ) = ∫_{|β_o|<1} S d²f (``propagating_fraction``):
 
-    f_r(ω_i, ω_o) = F(θ_i) (1 − e^{−g}) S(f) (n_i/λ)²      [1/sr].
+    f_r(ω_i, ω_o) = F(θ_i) (1 − e^{−g}) S(f) (n_i/λ)² / P(θ_i, λ)      [1/sr].
 
-Since dω_o = d²β_o / cos θ_o and d²f = (n_i/λ)² d²β_o, ∫ f_r cos θ_o dω_o = F (1 − e^{−g}) ∫_{|β_o|<1} S d²f,
-which is at most F (1 − e^{−g}) and equal to it when the whole PSD propagates (energy bound).
+Since dω_o = d²β_o / cos θ_o and d²f = (n_i/λ)² d²β_o, ∫ f_r cos θ_o dω_o = F (1 − e^{−g}) exactly: with the
+specular part the directional albedo is F(θ_i), never more (issue 12; without the 1/P factor a σ 0.3 µm,
+ℓ_c 1 µm glass read 0.874 in a furnace). Harvey–Shack's F, g and P belong to the incident side, so the
+model is not reciprocal; the renderer evaluates it with the side its paths arrive from as ω_i
+(``worker.render.bsdfs``), which makes its albedo exactly F(θ) and the sample weights constant.
 
 The lobe is importance-sampled *exactly*: draw f from S (Gaussian PSD: Box–Muller; ABC PSD: closed-form
 inverse of the radial CDF), map β_o = λf/n_i − β_i and reject |β_o| ≥ 1. The solid-angle density is
@@ -38,6 +45,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import Any, Literal
+
+import numpy as np
 
 from hgcore.errors import InputError
 from hgcore.optics.array_ops import ArrayOps
@@ -98,6 +107,87 @@ def sample_psd_frequency(surface: RoughSurface, u1: Any, u2: Any, ops: ArrayOps)
         radius_per_m = ops.sqrt(ops.maximum(growth - 1.0, 0.0)) / surface.abc_b_m
     angle = 2.0 * math.pi * u2
     return radius_per_m * ops.cos(angle), radius_per_m * ops.sin(angle)
+
+
+def radial_cdf(surface: RoughSurface, radius_per_m: Any, ops: ArrayOps) -> Any:
+    """P(|f| < F) of the PSD read as a density over the frequency plane (F ≥ 0, cycles/m)."""
+    if surface.psd_model == "gaussian":
+        return 1.0 - ops.exp(-((math.pi * surface.correlation_length_m) ** 2) * radius_per_m * radius_per_m)
+    growth = 1.0 + surface.abc_b_m**2 * radius_per_m * radius_per_m
+    return 1.0 - ops.exp((-0.5 * (surface.abc_exponent - 1.0)) * ops.log(growth))
+
+
+# Gauss–Legendre nodes/weights on [0, 1] for the angular integral of ``propagating_fraction``.
+_LEGENDRE_NODES, _LEGENDRE_WEIGHTS = np.polynomial.legendre.leggauss(32)
+_ANGLE_FRACTIONS = [float(0.5 * (node + 1.0)) for node in _LEGENDRE_NODES]
+_ANGLE_WEIGHTS = [float(0.5 * weight) for weight in _LEGENDRE_WEIGHTS]
+
+
+def propagating_fraction(
+    surface: RoughSurface,
+    sin_theta_i: Any,
+    wavelength_m: Any,
+    ops: ArrayOps,
+    exterior_ior: Any = 1.0,
+    exit_ior: Any = 1.0,
+    reflection: bool = False,
+) -> Any:
+    """P = ∫ S d²f over the frequencies that propagate after scattering (dimensionless, in [0, 1]).
+
+    ``reflection``: n_o = n_i, so the disk always contains 0 (t₋ < 0) and the cheaper one-sided form with
+    constant angles is used (a quarter of the work: this runs per wavelength at every rough vertex).
+
+    In the frequency plane the propagating set is the disk |f − c| < ρ, c = n_i β_i/λ (|c| = n_i sin θ_i/λ),
+    ρ = n_o/λ (n_o = n_i for reflection, n_t for transmission: |β_o| < 1). S is rotationally symmetric about
+    0, so along each direction e at angle φ from c the disk covers t ∈ [t₋, t₊], t± = c·e ± √(ρ² − |c|² +
+    (c·e)²), and P = (1/π) ∫ [CDF(max(t₊, 0)) − CDF(max(t₋, 0))] dφ with the closed-form radial CDF
+    (``radial_cdf``), over φ ∈ [0, π] when the disk contains 0 and over the directions that meet it,
+    φ ∈ [0, φ_m], sin φ_m = ρ/|c|, when it does not (transmission into a rarer medium beyond the critical
+    angle); there φ = φ_m(1 − s²) removes the √(φ_m − φ) end point. 32 Gauss–Legendre nodes: error
+    ≤ 2e-3 for θ_i ≤ 82° (tests: against a direct 2-D quadrature over the disk), up to 6e-3 within 3° of
+    grazing, where a narrow lobe's cut by the horizon is sharp.
+    """
+    centre = exterior_ior * sin_theta_i / wavelength_m
+    radius = exit_ior / wavelength_m
+    if reflection:
+        total_reflection: Any = 0.0
+        for fraction, weight in zip(_ANGLE_FRACTIONS, _ANGLE_WEIGHTS, strict=True):
+            along = centre * math.cos(math.pi * fraction)
+            root = ops.sqrt(ops.maximum(radius * radius - centre * centre + along * along, 0.0))
+            total_reflection = total_reflection + weight * radial_cdf(surface, along + root, ops)
+        return total_reflection
+    outside = centre > radius
+    gap = ops.sqrt(ops.maximum(centre * centre - radius * radius, 0.0))
+    angle_max = ops.where(outside, ops.atan2(radius, gap), math.pi)
+    total: Any = 0.0
+    for fraction, weight in zip(_ANGLE_FRACTIONS, _ANGLE_WEIGHTS, strict=True):
+        angle = ops.where(outside, angle_max * (1.0 - fraction * fraction), math.pi * fraction)
+        jacobian = ops.where(outside, 2.0 * angle_max * fraction / math.pi, 1.0)
+        along = centre * ops.cos(angle)
+        discriminant = radius * radius - centre * centre + along * along
+        root = ops.sqrt(ops.maximum(discriminant, 0.0))
+        upper = radial_cdf(surface, ops.maximum(along + root, 0.0), ops)
+        lower = radial_cdf(surface, ops.maximum(along - root, 0.0), ops)
+        total = total + weight * jacobian * ops.where(discriminant > 0.0, upper - lower, 0.0)
+    return total
+
+
+# Grid of ``reflection_fraction_table``: sin θ = 1 − (1 − x)² (dense near grazing, where P changes fastest)
+# on 65 nodes of x, and vacuum wavelengths on 36 nodes over 300–1000 nm.
+TABLE_ANGLE_NODES = 65
+TABLE_WAVELENGTHS_M = np.linspace(300e-9, 1000e-9, 36)
+
+
+def reflection_fraction_table(surface: RoughSurface) -> np.ndarray:
+    """P of reflection in air (n_i = n_o = 1) on the (x, λ) grid, shape (angles, wavelengths), for kernels
+    that interpolate it bilinearly instead of integrating per sample (tests bound the interpolation
+    error against :func:`propagating_fraction`)."""
+    from hgcore.optics.array_ops import NUMPY
+
+    x = np.linspace(0.0, 1.0, TABLE_ANGLE_NODES)
+    sin_theta = 1.0 - (1.0 - x) ** 2
+    grid_sin, grid_wavelength = np.meshgrid(sin_theta, TABLE_WAVELENGTHS_M, indexing="ij")
+    return np.asarray(propagating_fraction(surface, grid_sin, grid_wavelength, NUMPY, reflection=True))
 
 
 def roughness_exponent(
@@ -164,11 +254,19 @@ def rough_reflection_eval(
     reflectance: Any,
     ops: ArrayOps,
     exterior_ior: float = 1.0,
+    fraction: Any = None,
 ) -> Any:
-    """Scattered BRDF f_r [1/sr] (without cos θ_o); ``reflectance`` is F(θ_i). 0 below the horizon."""
+    """Scattered BRDF f_r [1/sr] (without cos θ_o), renormalised over the propagating frequencies;
+    ``reflectance`` is F(θ_i). 0 below the horizon. ``fraction``: P if the caller has it (a kernel's lookup
+    table of :func:`propagating_fraction`), else it is computed."""
     g = roughness_exponent(surface.rms_height_m, wi[2], wavelength_m, exterior_ior)
     density = _lobe_density_beta(surface, wi, wo, wavelength_m, exterior_ior, exterior_ior, ops)
-    value = reflectance * (1.0 - ops.exp(-g)) * density
+    if fraction is None:
+        sin_i = ops.sqrt(ops.maximum(wi[0] * wi[0] + wi[1] * wi[1], 0.0))
+        fraction = propagating_fraction(
+            surface, sin_i, wavelength_m, ops, exterior_ior, exterior_ior, reflection=True
+        )
+    value = reflectance * (1.0 - ops.exp(-g)) * density / ops.maximum(fraction, 1e-12)
     return ops.where((wi[2] > 0.0) & (wo[2] > 0.0), value, 0.0)
 
 
@@ -216,7 +314,8 @@ def rough_transmission_eval(
     exterior_ior: float,
     interior_ior: float,
 ) -> Any:
-    """Scattered BTDF f_t [1/sr] (without |cos θ_t|) into the lower half-space (wt[2] < 0).
+    """Scattered BTDF f_t [1/sr] (without |cos θ_t|) into the lower half-space (wt[2] < 0), renormalised over
+    the propagating frequencies (|β_t| < 1), in the transmitted medium's solid angle (no n² factor).
 
     ``transmittance`` is T(θ_i) = 1 − R and ``cos_theta_t_specular`` the specular refraction cosine, both from
     :func:`hgcore.optics.fresnel.fresnel_dielectric` with η = n_t/n_i.
@@ -225,7 +324,9 @@ def rough_transmission_eval(
         surface.rms_height_m, wi[2], cos_theta_t_specular, wavelength_m, exterior_ior, interior_ior
     )
     density = _lobe_density_beta(surface, wi, wt, wavelength_m, exterior_ior, interior_ior, ops)
-    value = transmittance * (1.0 - ops.exp(-g_t)) * density
+    sin_i = ops.sqrt(ops.maximum(wi[0] * wi[0] + wi[1] * wi[1], 0.0))
+    fraction = propagating_fraction(surface, sin_i, wavelength_m, ops, exterior_ior, interior_ior)
+    value = transmittance * (1.0 - ops.exp(-g_t)) * density / ops.maximum(fraction, 1e-12)
     return ops.where((wi[2] > 0.0) & (wt[2] < 0.0), value, 0.0)
 
 

@@ -1,7 +1,7 @@
 """``hgrender coherence``: the coherence a source gives a receiver (issue 2, item 7).
 
 Thin wrapper over ``hgcore.optics.calculator.coherence_at`` (NumPy only: no Mitsuba, no Dr.Jit). Prints one
-JSON object with ``--json``, else a readable table. Invalid values raise ValueError naming the flag, which the
+JSON object with ``--json``, else a readable table. Invalid values raise InputError naming the flag, which the
 CLI entry point turns into exit code 2 and a one-line message.
 """
 

@@ -14,14 +14,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import OpenImageIO as oiio
 
+from hgcore.artifacts.exr import read_exr
 from worker.render.api import render_scene
 
 BOX_HALF_SIZE_M = 3.0
 WALLS = [  # (centre axis, sign): the wall at sign·half-size along that axis, emitting inwards
     (axis, sign) for axis in range(3) for sign in (-1.0, 1.0)
 ]
+WALL_RADIANCE = 1.0  # per band: a constant spectrum of 1 at radiance_scale 1 (the walls' pixels read it)
 
 
 def _wall(axis: int, sign: float) -> dict[str, Any]:
@@ -40,7 +41,7 @@ def _wall(axis: int, sign: float) -> dict[str, Any]:
         "width_m": side,
         "height_m": side,
         "spectrum": {"type": "constant", "value": 1.0},
-        "radiance_scale": 1.0,
+        "radiance_scale": WALL_RADIANCE,
     }
 
 
@@ -70,11 +71,7 @@ def sphere(radius_m: float = 0.6) -> dict[str, Any]:
 
 
 def _read(path: Path) -> dict[str, np.ndarray]:
-    image = oiio.ImageInput.open(str(path))
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"), dtype=float)
-    image.close()
-    return {name: pixels[..., i] for i, name in enumerate(names)}
+    return {name: values.astype(float) for name, values in read_exr(path).channels.items()}
 
 
 def furnace_ratio(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> tuple[float, float]:
@@ -89,9 +86,8 @@ def furnace_ratio(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> tuple[
     mask = image["depth"] < 2.5
     assert mask.sum() >= 20, "the object covers too few pixels"
     values = np.mean([image[name][mask] for name in bands], axis=0)
-    walls = float(np.mean([image[name][~mask] for name in bands]))
     error = float(np.std(values, ddof=1) / math.sqrt(values.size))
-    return float(values.mean()) / walls, error / walls
+    return float(values.mean()) / WALL_RADIANCE, error / WALL_RADIANCE
 
 
 def box(half_extents_m: tuple[float, float, float]) -> dict[str, Any]:

@@ -22,9 +22,9 @@ import math
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
+from hgcore.artifacts.exr import read_exr
 from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.thin_film import (
@@ -120,12 +120,9 @@ def expected_band_values(sphere_radius_m: float, edges_nm: np.ndarray) -> np.nda
 def rendered_band_values(sphere_radius_m: float, tmp_path: Path) -> tuple[np.ndarray, np.ndarray, list]:
     out = tmp_path / f"R{sphere_radius_m}"
     render_scene(scene(sphere_radius_m), out, seed=5)
-    image = oiio.ImageInput.open(str(out / "image.exr"))
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"), dtype=float)
-    image.close()
-    bands = [name for name in names if name.startswith("S0.")]
-    per_pixel = np.stack([pixels[..., names.index(name)].ravel() for name in bands])
+    image = read_exr(out / "image.exr")
+    bands = [name for name in image.channels if name.startswith("S0.")]
+    per_pixel = np.stack([image.channels[name].astype(float).ravel() for name in bands])
     return per_pixel.mean(axis=1), per_pixel.std(axis=1, ddof=1) / math.sqrt(per_pixel.shape[1]), bands
 
 

@@ -21,9 +21,9 @@ import math
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
+from hgcore.artifacts.exr import read_exr
 from worker.render.api import render_scene
 
 K_PER_M = 2 * math.pi / 550e-9
@@ -117,11 +117,9 @@ def rendered_coherence_lengths_um(side_m: float, receiver_x_m: float, tmp_path: 
     """(ℓ₁, ℓ₂) of the pixel-mean M and their standard errors, and the mean r (m)."""
     out = tmp_path / f"a{side_m}_x{receiver_x_m}"
     render_scene(scene(side_m, receiver_x_m), out, seed=3)
-    image = oiio.ImageInput.open(str(out / "image.exr"))
-    names = list(image.spec().channelnames)
-    pixels = np.asarray(image.read_image("float"), dtype=float)
-    image.close()
-    channel = {name: pixels[..., i].ravel() for i, name in enumerate(names)}
+    channel = {
+        name: values.astype(float).ravel() for name, values in read_exr(out / "image.exr").channels.items()
+    }
     assert np.all(channel["coherence.weight"] > 0)
     m = np.stack(
         [

@@ -76,6 +76,7 @@ class MaterialKernels:
         self.kinds = materials.kinds
         self.max_beams = max(materials.max_beams(), 2)
         self.visibility = visibility  # (coherence, separation_world_m, wavelengths) -> Spectrum μ
+        self._fraction_tables: dict[int, tuple[rough_surface.RoughSurface, Any]] = {}
 
     # ---------------------------------------------------------------- parameters
     def param(self, material: Any, offset: int) -> Any:
@@ -155,7 +156,7 @@ class MaterialKernels:
             pdf = dr.select(is_kind, wo.z / math.pi, pdf)
         for index, surface in self._per_material(mat.MaterialKind.ROUGH_CONDUCTOR):
             is_this = valid & (material == index)
-            fresnel = self.interface_reflectance(material, wo.z, wavelengths)
+            fresnel = self.interface_reflectance(material, wi.z, wavelengths)
             lobe_value, lobe_pdf = self._rough_eval(surface, wi, wo, wavelengths, fresnel)
             value = dr.select(is_this, lobe_value, value)
             pdf = dr.select(is_this, lobe_pdf, pdf)
@@ -354,19 +355,55 @@ class MaterialKernels:
     def _rough_eval(
         self, surface: rough_surface.RoughSurface, wi: Any, wo: Any, wavelengths: Any, reflectance: Any
     ) -> tuple[Any, Any]:
-        """Scattered lobe value f·cos θo and hero-MIS pdf; light arrives along ``wo`` (reciprocity)."""
+        """Scattered lobe value f·cos θo and hero-MIS pdf for light arriving along ``wo``.
+
+        Harvey–Shack's incident-side factors (1 − e^{−g}, the propagating fraction) are those of the side
+        the path arrives from, ``wi`` (``rough_surface``: the model is not reciprocal; this choice gives the
+        estimator the albedo F exactly). ``reflectance`` is the caller's F (conductors: at ``wi``).
+        """
         mi = self.mi
         value = mi.Spectrum(0.0)
         pdf_sum = mi.Float(0.0)
         light, view = _vec(wo), _vec(wi)
+        sin_view = dr.sqrt(dr.maximum(wi.x * wi.x + wi.y * wi.y, 0.0))
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
+            fraction = self._reflection_fraction(surface, sin_view, wavelengths[j])
             brdf = rough_surface.rough_reflection_eval(
-                surface, light, view, wavelength_m, reflectance[j], OPS
+                surface, view, light, wavelength_m, reflectance[j], OPS, fraction=fraction
             )
             value[j] = brdf * wo.z
             pdf_sum += rough_surface.rough_reflection_pdf(surface, view, light, wavelength_m, OPS)
         return value, pdf_sum / len(wavelengths)
+
+    def _reflection_fraction(
+        self, surface: rough_surface.RoughSurface, sin_theta: Any, wavelength_nm: Any
+    ) -> Any:
+        """Propagating fraction P of reflection in air, bilinear in ``reflection_fraction_table`` (built once
+        per surface): 4 gathers instead of a 32-node angular integral per wavelength and sample."""
+        mi = self.mi
+        key = id(surface)
+        if key not in self._fraction_tables:
+            table = rough_surface.reflection_fraction_table(surface).ravel()
+            self._fraction_tables[key] = (surface, mi.Float(table))
+        table = self._fraction_tables[key][1]
+        columns = len(rough_surface.TABLE_WAVELENGTHS_M)
+        first = float(rough_surface.TABLE_WAVELENGTHS_M[0]) * 1e9
+        last = float(rough_surface.TABLE_WAVELENGTHS_M[-1]) * 1e9
+        # Invert sin θ = 1 − (1 − x)², then cell coordinates along both axes.
+        x = 1.0 - dr.sqrt(dr.maximum(1.0 - sin_theta, 0.0))
+        rows = rough_surface.TABLE_ANGLE_NODES
+        row_f = dr.clip(x * (rows - 1), 0.0, rows - 1.001)
+        column_f = dr.clip((wavelength_nm - first) / (last - first) * (columns - 1), 0.0, columns - 1.001)
+        row, column = mi.UInt32(row_f), mi.UInt32(column_f)
+        a, b = row_f - mi.Float(row), column_f - mi.Float(column)
+
+        def at(r: Any, c: Any) -> Any:
+            return dr.gather(mi.Float, table, r * columns + c)
+
+        top = at(row, column) * (1.0 - b) + at(row, column + 1) * b
+        bottom = at(row + 1, column) * (1.0 - b) + at(row + 1, column + 1) * b
+        return top * (1.0 - a) + bottom * a
 
     def film_terms(self, material: Any, cos_i: Any, wavelengths: Any) -> list[Any]:
         """[R_incoherent, X_1 … X_{P−1}] per wavelength (``combine_film_terms``) at incidence cos_i."""
@@ -402,7 +439,12 @@ class MaterialKernels:
         sample2: Any,
         film_terms_out: list | None,
     ):
-        """Specular (delta) part with probability e^{−g(λ_hero)}, else an exact PSD-lobe sample at λ_hero.
+        """Specular (delta) part with probability ⟨e^{−g}⟩ (the mean over the path's wavelengths), else an
+        exact PSD-lobe sample at λ_hero.
+
+        The specular fraction e^{−g} varies by orders of magnitude across the spectrum (g ∝ 1/λ²); choosing
+        by the hero's alone would give the other wavelengths weights up to e^{g_hero − g_j} (fireflies).
+        The mean is a one-sample MIS over the wavelengths: every weight is at most 4·F_j/F.
 
         For a thin film (``film_terms_out`` given) the interface reflectance is the film's incoherent
         reflectance at the sampled direction; its terms are appended to ``film_terms_out``.
@@ -410,8 +452,12 @@ class MaterialKernels:
         mi = self.mi
         view = _vec(wi)
         hero_m = wavelengths[0] * 1e-9
-        g_hero = rough_surface.roughness_exponent(surface.rms_height_m, wi.z, hero_m)
-        specular_probability = dr.exp(-g_hero)
+        specular_probability = _mean_over_wavelengths(
+            [
+                dr.exp(-rough_surface.roughness_exponent(surface.rms_height_m, wi.z, wavelengths[j] * 1e-9))
+                for j in range(len(wavelengths))
+            ]
+        )
         choose_specular = sample1 < specular_probability
         lobe_sample1 = dr.clip(
             (sample1 - specular_probability) / dr.maximum(1.0 - specular_probability, 1e-12), 0.0, 0.999999
@@ -422,7 +468,7 @@ class MaterialKernels:
         lobe_wo = mi.Vector3f(*lobe_dir)
         wo = dr.select(choose_specular, mi.reflect(wi), lobe_wo)
         if film_terms_out is None:
-            reflectance = self.interface_reflectance(material, wo.z, wavelengths)
+            reflectance = self.interface_reflectance(material, wi.z, wavelengths)
         else:
             terms = self.film_terms(material, wo.z, wavelengths)
             film_terms_out.append(terms)
@@ -451,10 +497,13 @@ class MaterialKernels:
     ) -> tuple[Any, Any]:
         """f·|cos θo| and hero-MIS pdf of the rough interface's scattered lobes (light arriving along wo).
 
-        Directions are mirrored so that the camera side is +z. Reflection: the Eq. 15 lobe in the camera's
-        medium with the dielectric Fresnel R; transmission: the Harvey–Shack transmitted lobe with T = 1 − R,
-        evaluated with the light side as the incident medium. The pdf is that of ``_rough_dielectric_sample``
-        (selection probability × lobe density).
+        Directions are mirrored so that the camera side is +z, and the camera side is Harvey–Shack's
+        incident side (as in ``_rough_eval``). Reflection: the renormalised Eq. 15 lobe in the camera's medium
+        with the dielectric Fresnel R(θ_view); transmission: the renormalised transmitted lobe with
+        T = 1 − R(θ_view) times the radiance factor (n_camera/n_light)² of non-symmetric transport. Each lobe
+        then carries exactly R(1 − e^{−g}) and T(1 − e^{−g_t}): with the specular parts the interface
+        returns R + T = 1 (white furnace). The pdf is that of ``_rough_dielectric_sample`` (selection
+        probability × lobe density), so a lobe sample's weight is a constant.
         """
         mi = self.mi
         outside, n_camera, n_other = self._camera_side(material, wi, wavelengths)
@@ -466,41 +515,38 @@ class MaterialKernels:
         pdf_sum = mi.Float(0.0)
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
-            r_view, _ = fresnel_dielectric(view.z, n_other[j] / n_camera[j], OPS)
-            r_light, cos_t_light = fresnel_dielectric(light.z, n_other[j] / n_camera[j], OPS)
+            r_view, cos_t_view = fresnel_dielectric(view.z, n_other[j] / n_camera[j], OPS)
+            # Beyond the critical angle T is 0, not the float32 rounding of 1 − R (which the lobe's
+            # renormalisation over a vanishing propagating fraction would amplify into fireflies).
+            t_view = dr.select(cos_t_view > 0.0, 1.0 - r_view, 0.0)
             reflection = rough_surface.rough_reflection_eval(
-                surface, _vec(light), _vec(view), wavelength_m, r_light, OPS, exterior_ior=n_camera[j]
+                surface, _vec(view), _vec(light), wavelength_m, r_view, OPS, exterior_ior=n_camera[j]
             )
             reflection_pdf = rough_surface.rough_reflection_pdf(
                 surface, _vec(view), _vec(light), wavelength_m, OPS, exterior_ior=n_camera[j]
             )
-            # Transmission with the light's medium as the incident side (its +z is our −z).
-            light_in = (light.x, light.y, -light.z)
-            view_out = (view.x, view.y, -view.z)
-            r_from_light, cos_t_spec = fresnel_dielectric(-light.z, n_camera[j] / n_other[j], OPS)
             transmission = rough_surface.rough_transmission_eval(
                 surface,
-                light_in,
-                view_out,
+                _vec(view),
+                _vec(light),
                 wavelength_m,
-                1.0 - r_from_light,
-                cos_t_spec,
+                t_view,
+                cos_t_view,
                 OPS,
-                exterior_ior=n_other[j],
-                interior_ior=n_camera[j],
-            )
+                exterior_ior=n_camera[j],
+                interior_ior=n_other[j],
+            ) * dr.square(n_camera[j] / n_other[j])
             transmission_pdf = rough_surface.rough_transmission_pdf(
                 surface,
                 _vec(view),
-                (light.x, light.y, light.z),
+                _vec(light),
                 wavelength_m,
                 OPS,
                 exterior_ior=n_camera[j],
                 interior_ior=n_other[j],
             )
-            del cos_t_light
             value[j] = dr.select(reflected, reflection, transmission) * dr.abs(light.z)
-            pdf_sum += dr.select(reflected, r_view * reflection_pdf, (1.0 - r_view) * transmission_pdf)
+            pdf_sum += dr.select(reflected, r_view * reflection_pdf, t_view * transmission_pdf)
         return value, pdf_sum / len(wavelengths)
 
     def _rough_dielectric_sample(
@@ -531,11 +577,19 @@ class MaterialKernels:
             (sample1 - reflectance_hero) / dr.maximum(1.0 - reflectance_hero, 1e-12),
         )
         u = dr.clip(u, 0.0, 0.999999)
-        g_reflect = rough_surface.roughness_exponent(surface.rms_height_m, view.z, hero_m, n_camera[0])
-        g_transmit = rough_surface.transmission_roughness_exponent(
-            surface.rms_height_m, view.z, cos_t_hero, hero_m, n_camera[0], n_other[0]
-        )
-        specular_probability = dr.exp(-dr.select(reflect, g_reflect, g_transmit))
+        # Specular fraction: the mean of e^{−g} over the wavelengths (see ``_rough_sample``).
+        specular_fractions = []
+        for j in range(len(wavelengths)):
+            wavelength_m = wavelengths[j] * 1e-9
+            _, cos_t_j = fresnel_dielectric(view.z, n_other[j] / n_camera[j], OPS)
+            g_reflect = rough_surface.roughness_exponent(
+                surface.rms_height_m, view.z, wavelength_m, n_camera[j]
+            )
+            g_transmit = rough_surface.transmission_roughness_exponent(
+                surface.rms_height_m, view.z, cos_t_j, wavelength_m, n_camera[j], n_other[j]
+            )
+            specular_fractions.append(dr.exp(-dr.select(reflect, g_reflect, g_transmit)))
+        specular_probability = _mean_over_wavelengths(specular_fractions)
         specular = u < specular_probability
         u_lobe = dr.clip(
             (u - specular_probability) / dr.maximum(1.0 - specular_probability, 1e-12), 0.0, 0.999999
@@ -691,6 +745,13 @@ class MaterialKernels:
         )
         pdf = dr.select(choose_specular, 1.0, lobe_pdf)
         return wo, weight, pdf, choose_specular
+
+
+def _mean_over_wavelengths(values: list[Any]) -> Any:
+    total = values[0]
+    for value in values[1:]:
+        total = total + value
+    return total / len(values)
 
 
 def _refract(mi: Any, wi: Any, eta_ti: Any, cos_t: Any) -> Any:

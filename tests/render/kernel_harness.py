@@ -1,0 +1,108 @@
+"""Drive one material's ``MaterialKernels`` directly (no ray tracing): sample and evaluate in bulk.
+
+A one-material scene is compiled and loaded as the renderer would; ``KernelProbe`` then calls the kernels'
+``sample`` and ``eval_pdf`` on arrays of local directions with fixed wavelengths, so tests can integrate a
+material's albedo and histogram its sampling exactly as the integrator sees them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from worker.render.api import as_scene, renderer_for
+from worker.render.bsdfs import IncidentCoherence
+
+
+def probe_scene(material: dict[str, Any]) -> dict[str, Any]:
+    return {
+        "schema": "hgrender/scene/v1",
+        "name": "kernel probe",
+        "camera": {"type": "perspective", "origin_m": [0, 0, 3], "target_m": [0, 0, 0], "up": [0, 1, 0]},
+        "film": {"width": 4, "height": 4, "bands": 4, "spp": 1, "max_depth": 3},
+        "materials": {"probe": material},
+        "shapes": [{"type": "sphere", "center_m": [0, 0, 0], "radius_m": 1.0, "material": "probe"}],
+        "emitters": [
+            {
+                "type": "sphere",
+                "center_m": [0, 0, 5],
+                "radius_m": 0.1,
+                "spectrum": {"type": "constant", "value": 1.0},
+                "radiance_scale": 1.0,
+            }
+        ],
+    }
+
+
+class KernelProbe:
+    """The kernels of the probe material (index 0) of a one-material scene."""
+
+    def __init__(self, material: dict[str, Any]) -> None:
+        renderer = renderer_for(as_scene(probe_scene(material)))
+        self.mi = renderer.mi
+        self.kernels = renderer.integrator.kernels
+        self.material_index = 0
+
+    def _arrays(self, wi: np.ndarray, wavelengths_nm: np.ndarray):
+        mi = self.mi
+        count = wi.shape[0]
+        local_wi = mi.Vector3f(
+            *(mi.Float(np.ascontiguousarray(wi[:, i], dtype=np.float32)) for i in range(3))
+        )
+        spectrum = mi.Spectrum(0.0)
+        for j in range(len(spectrum)):
+            spectrum[j] = mi.Float(np.full(count, wavelengths_nm[j], dtype=np.float32))
+        material = mi.UInt32(np.full(count, self.material_index, dtype=np.uint32))
+        return local_wi, spectrum, material
+
+    def sample(
+        self, wi: np.ndarray, wavelengths_nm: np.ndarray, uniforms: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """wo (N, 3), weight (N, 4), pdf (N), delta (N) for directions ``wi`` (N, 3) and uniforms (N, 3)."""
+        mi = self.mi
+        local_wi, spectrum, material = self._arrays(wi, wavelengths_nm)
+        u1 = mi.Float(np.ascontiguousarray(uniforms[:, 0], dtype=np.float32))
+        u2 = mi.Point2f(
+            mi.Float(np.ascontiguousarray(uniforms[:, 1], dtype=np.float32)),
+            mi.Float(np.ascontiguousarray(uniforms[:, 2], dtype=np.float32)),
+        )
+        active = mi.Bool(np.ones(wi.shape[0], dtype=bool))
+        wo, weight, pdf, delta, _, _ = self.kernels.sample(material, local_wi, spectrum, u1, u2, active)
+        return {
+            "wo": np.stack([np.asarray(wo.x), np.asarray(wo.y), np.asarray(wo.z)], axis=1).astype(float),
+            "weight": np.stack([np.asarray(weight[j]) for j in range(len(weight))], axis=1).astype(float),
+            "pdf": np.asarray(pdf).astype(float),
+            "delta": np.asarray(delta).astype(bool),
+        }
+
+    def eval_pdf(
+        self, wi: np.ndarray, wo: np.ndarray, wavelengths_nm: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(f·|cos θo| per wavelength (N, 4), hero-MIS pdf (N)) of the non-Dirac part."""
+        mi = self.mi
+        local_wi, spectrum, material = self._arrays(wi, wavelengths_nm)
+        local_wo = mi.Vector3f(
+            *(mi.Float(np.ascontiguousarray(wo[:, i], dtype=np.float32)) for i in range(3))
+        )
+        zero = mi.Float(np.zeros(wi.shape[0], dtype=np.float32))
+        coherence = IncidentCoherence(
+            zero, zero, zero, zero + 1.0, mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0)
+        )
+        frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+        active = mi.Bool(np.ones(wi.shape[0], dtype=bool))
+        value, pdf = self.kernels.eval_pdf(
+            material, local_wi, local_wo, spectrum, coherence, mi.Vector3f(0, 0, 1), frame, active
+        )
+        return (
+            np.stack([np.asarray(value[j]) for j in range(len(value))], axis=1).astype(float),
+            np.asarray(pdf).astype(float),
+        )
+
+
+def direction(theta_deg: float, count: int, lower: bool = False) -> np.ndarray:
+    """``count`` copies of the local direction at polar angle θ in the xz plane (z < 0 if ``lower``)."""
+    theta = math.radians(theta_deg)
+    z = -math.cos(theta) if lower else math.cos(theta)
+    return np.tile([math.sin(theta), 0.0, z], (count, 1))
