@@ -62,15 +62,16 @@ def secondary_source_m(values: dict[str, np.ndarray]) -> SecondarySource:
     weighted by the light they bring. The pixel's paths sample those directions with exactly that weight
     (their luminance contribution), so the weighted sample covariance of their unit arrival directions d,
     with the effective-sample-count correction W²/(W² − Σw²) (unbiased for weighted samples), projected on
-    the plane ⟂ the mean direction estimates it. Pixels with fewer than two effective samples have no
-    estimate and leave this part out. Directions are in camera coordinates (right, up, forward), so the
+    the plane ⟂ the mean direction estimates it. Pixels with fewer than three effective samples have no
+    estimate and leave this part out (two directions span a line only: a rank-one covariance whose ℓ₁ is
+    unbounded). Directions are in camera coordinates (right, up, forward), so the
     transverse x axis is the camera's right vector projected, as for the other paths (``frames``).
     """
     weight = values["vcz_w"]
     weight_sq = values["vcz_w2"]
     with np.errstate(divide="ignore", invalid="ignore"):
         effective = np.where(weight_sq > 0, weight * weight / weight_sq, 0.0)
-    usable = effective >= 2.0
+    usable = effective >= 3.0
     safe = np.where(usable, weight, 1.0)
     mean = np.stack([values[f"vcz_d{axis}"] / safe for axis in "xyz"], axis=-1)
     second = np.empty((*weight.shape, 3, 3))
