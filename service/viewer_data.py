@@ -35,11 +35,13 @@ from hgcore.artifacts.exr import ArtifactFormatError, read_exr, write_exr
 from hgcore.artifacts.images import channels_from_sums
 from hgcore.artifacts.keys import artifact_key, chunks_prefix
 from hgcore.artifacts.layout import (
+    CHANNEL_UNITS,
     CHUNK_PARTIAL_SUFFIX,
     COHERENCE_DIAGNOSTICS,
     COHERENCE_PREFIX,
     COHERENCE_WEIGHT,
     IMAGE_EXR,
+    RADIANCE_UNIT,
     RGB_CHANNELS,
     BandLayout,
     coherence_channel,
@@ -54,20 +56,6 @@ from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
 from service.image_metrics import PERCEPTUAL_METRICS, metric_exposure_ev, perceptual_map
 
 RGB_LAYER = "rgb"
-RADIANCE_UNIT = "W·m⁻²·sr⁻¹·nm⁻¹"
-_UNITS = {
-    "coherence.l1_um": "µm",
-    "coherence.l2_um": "µm",
-    "coherence.angle": "rad",
-    "coherence.anisotropy": "1",
-    "coherence.area_um2": "µm²",
-    "coherence.r_m": "m",
-    "coherence.Mxx": "m⁻²",
-    "coherence.Mxy": "m⁻²",
-    "coherence.Myy": "m⁻²",
-    "coherence.weight": "1",
-    "depth": "m",
-}
 COMPARE_MODES: tuple[str, ...] = ("abs", "rel", *PERCEPTUAL_METRICS)
 
 
@@ -86,7 +74,7 @@ def layer_unit(name: str) -> str:
     kind = layer_kind(name)
     if kind in ("rgb", "band"):
         return RADIANCE_UNIT
-    return _UNITS.get(name, "1")
+    return CHANNEL_UNITS.get(name, "1")
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,27 @@ COHERENCE_PREFIX = "coherence."
 COHERENCE_DIAGNOSTICS = ("l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy")
 """The BRIEF's per-pixel diagnostics, in file order (``coherence.weight`` follows them)."""
 COHERENCE_WEIGHT = "coherence.weight"
+RADIANCE_UNIT = "W·m⁻²·sr⁻¹·nm⁻¹"
+"""Unit of the spectral bands and of R, G, B (band-averaged spectral radiance)."""
+CHANNEL_UNITS: dict[str, str] = {
+    **{
+        COHERENCE_PREFIX + name: unit
+        for name, unit in (
+            ("l1_um", "µm"),
+            ("l2_um", "µm"),
+            ("angle", "rad"),
+            ("anisotropy", "1"),
+            ("area_um2", "µm²"),
+            ("r_m", "m"),
+            ("Mxx", "m⁻²"),
+            ("Mxy", "m⁻²"),
+            ("Myy", "m⁻²"),
+            ("weight", "1"),
+        )
+    },
+    "depth": "m",
+}
+"""Units of the diagnostic and geometry channels (dimensionless ones: ``1``)."""
 LUMINANCE_VARIANCE = "Y"
 """``variance.exr``'s channel of the luminance mean's variance (beside one channel per band)."""
 

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.artifacts.layout import RGB_CHANNELS, is_spectral_channel, spectral_channel_wavelength_nm
 from hgrender.cli import CliError
 
 DEFAULT_TEV_ADDRESS: tuple[str, int] = ("127.0.0.1", 14158)  # tev's default listen address
@@ -42,12 +43,8 @@ def tev_address(text: str) -> tuple[str, int]:
 def channel_order(names: list[str]) -> list[str]:
     """``image.exr``'s channel order for tev: R, G, B first, then the bands by wavelength, then the rest
     grouped by layer."""
-    rgb = [n for n in ("R", "G", "B") if n in names]
-
-    def wavelength(name: str) -> float:
-        return float(name[3:-2].replace(",", "."))
-
-    bands = sorted((n for n in names if n.startswith("S0.") and n.endswith("nm")), key=wavelength)
+    rgb = [n for n in RGB_CHANNELS if n in names]
+    bands = sorted((n for n in names if is_spectral_channel(n)), key=spectral_channel_wavelength_nm)
     rest = sorted(n for n in names if n not in rgb and n not in bands)
     return rgb + bands + rest
 
