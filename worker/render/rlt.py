@@ -17,6 +17,7 @@ mean as ``hg_path`` (tests/integrator/test_rlt.py). Everything else (estimator, 
 
 from __future__ import annotations
 
+from hgcore.errors import InputError
 from worker.render.integrator import HGPathIntegrator, mi
 
 #: Integrator names a scene (``film.integrator``), ``hgrender render --integrator`` and jobs accept.
@@ -35,7 +36,7 @@ def integrator_class(name: str) -> type[HGPathIntegrator]:
         return HGPathIntegrator
     if name == "rlt":
         return RLTIntegrator
-    raise ValueError(f"integrator: must be one of {', '.join(INTEGRATORS)}, got {name!r}")
+    raise InputError(f"integrator: must be one of {', '.join(INTEGRATORS)}, got {name!r}")
 
 
 def register() -> None:
