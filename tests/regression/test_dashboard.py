@@ -13,7 +13,7 @@ import pytest
 
 from tests.regression.test_api import Client, suite
 from tests.service.conftest import LiveService
-from tests.web.conftest import screenshot
+from tests.web.conftest import screenshot, token_page
 
 pytestmark = pytest.mark.browser
 
@@ -21,17 +21,9 @@ pytestmark = pytest.mark.browser
 @pytest.fixture()
 def page(live_service: LiveService, chromium: Any) -> Iterator[Any]:
     """A page on the session's shared headless Chromium (tests/conftest.py) with the admin token set."""
-    context = chromium.new_context(viewport={"width": 1280, "height": 900})
-    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {live_service.admin_token!r});")
-    page = context.new_page()
-    page.set_default_timeout(60_000)  # the test machine's 2 cores are shared: allow slow renders of the page
-    errors: list[str] = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    try:
+    with token_page(chromium, live_service.admin_token, 1280, 900) as page:
+        page.set_default_timeout(60_000)  # the test machine's 2 cores are shared: allow slow page renders
         yield page
-    finally:
-        context.close()
-    assert not errors, errors
 
 
 def test_dashboard_shows_schedules_trend_and_compare(live_service: LiveService, page: Any) -> None:

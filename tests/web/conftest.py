@@ -196,11 +196,11 @@ def diagonal_cylinder_job(served: Served, tmp_path_factory: pytest.TempPathFacto
     return RenderedJob(job_id, read_exr(out_dir / "image.exr"))
 
 
-@pytest.fixture
-def page(chromium: Any, served: Served) -> Iterator[Any]:
-    """A 1280×800 page with the admin token in localStorage; fails the test on page errors."""
-    context = chromium.new_context(viewport={"width": 1280, "height": 800})
-    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {served.token!r});")
+@contextlib.contextmanager
+def token_page(chromium: Any, token: str, width: int, height: int, **context_options: Any) -> Iterator[Any]:
+    """A ``width``×``height`` page with ``token`` in localStorage; fails the test on page errors."""
+    context = chromium.new_context(viewport={"width": width, "height": height}, **context_options)
+    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {token!r});")
     page = context.new_page()
     errors: list[str] = []
     page.on("pageerror", lambda error: errors.append(str(error)))
@@ -209,6 +209,13 @@ def page(chromium: Any, served: Served) -> Iterator[Any]:
     finally:
         context.close()
     assert not errors, f"page errors: {errors}"
+
+
+@pytest.fixture
+def page(chromium: Any, served: Served) -> Iterator[Any]:
+    """A 1280×800 page with the admin token in localStorage; fails the test on page errors."""
+    with token_page(chromium, served.token, 1280, 800) as page:
+        yield page
 
 
 def screenshot(page: Any, name: str) -> Path:

@@ -17,7 +17,7 @@ import pytest
 
 from hgcore.artifacts.exr import read_exr
 from hgcore.imaging import tone_map
-from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, screenshot
+from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, screenshot, token_page
 from tests.web.test_browser import canvas_rgb, drawn_count, redrawn, viridis8
 
 pytestmark = pytest.mark.browser
@@ -27,16 +27,8 @@ WIDTH, HEIGHT = 1400, 900
 @pytest.fixture
 def wide(chromium: Any, served: Served) -> Iterator[Any]:
     """A 1400×900 page with the admin token; fails the test on page errors."""
-    context = chromium.new_context(viewport={"width": WIDTH, "height": HEIGHT}, accept_downloads=True)
-    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {served.token!r});")
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    try:
+    with token_page(chromium, served.token, WIDTH, HEIGHT, accept_downloads=True) as page:
         yield page
-    finally:
-        context.close()
-    assert not errors, f"page errors: {errors}"
 
 
 def open_image(page: Any, served: Served, job_id: str) -> None:
