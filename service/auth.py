@@ -3,7 +3,8 @@
 A token is ``hgr_`` + 32 random bytes (URL-safe base64); Redis stores only its SHA-256 hex digest, so a
 leaked database reveals no usable token. Scopes: ``submit`` (create/cancel/delete own jobs), ``read``
 (see own jobs and artifacts), ``admin`` (everything, every owner, token management). The rate limit is a
-fixed one-minute window per token: ``INCR`` of a key that expires after the window.
+fixed one-minute window per token (``service.rate_limit``: counted per process, added to a shared Redis
+counter in batches).
 """
 
 from __future__ import annotations
@@ -19,12 +20,12 @@ import redis
 import redis.asyncio as aioredis
 
 from hgcore.errors import InputError
+from service.rate_limit import RequestCounter, counter_key, current_window, retry_after_s
 
 SCOPES: tuple[str, ...] = ("submit", "read", "admin")
 TOKEN_PREFIX = "hgr_"
 _TOKEN_KEY = "hgrender:token:{}"
 _TOKEN_INDEX = "hgrender:tokens"
-_RATE_KEY = "hgrender:ratelimit:{}:{}"
 
 
 class AuthenticationError(Exception):
@@ -153,22 +154,25 @@ class TokenRegistry:
         return False
 
 
-# KEYS: token hash, this minute's rate counter. ARGV: counter TTL (s). Returns false for an unknown token,
-# else {count, hgetall...}: one round trip authenticates and counts (unknown tokens are not counted).
+# KEYS: token hash, this minute's rate counter. Returns false for an unknown token, else
+# {counter value, hgetall...}: one read-only round trip authenticates and reads the shared count.
 _AUTHENTICATE_LUA = """
 local record = redis.call('HGETALL', KEYS[1])
 if #record == 0 then return false end
-local count = redis.call('INCR', KEYS[2])
-if count == 1 then redis.call('EXPIRE', KEYS[2], ARGV[1]) end
-return {count, record}
+return {tonumber(redis.call('GET', KEYS[2]) or '0'), record}
 """
 
 
 class RequestAuthenticator:
-    """Authenticates a request's bearer token and applies its rate limit, on the API's asyncio client."""
+    """Authenticates a request's bearer token and applies its rate limit, on the API's asyncio client.
+
+    Requests are counted by ``service.rate_limit.RequestCounter``: read here, written in batches (a write
+    per request would wait for the private Redis's fsync).
+    """
 
     def __init__(self, aclient: aioredis.Redis, limit_per_minute: int) -> None:
         self.limit_per_minute = limit_per_minute
+        self.counter = RequestCounter(aclient)
         self._script = aclient.register_script(_AUTHENTICATE_LUA)
 
     async def __call__(self, token: str | None) -> Principal:
@@ -178,19 +182,21 @@ class RequestAuthenticator:
             raise AuthenticationError("authorization: malformed bearer token")
         token_hash = hash_token(token)
         now = time.time()
-        window = int(now // 60)
-        result = await self._script(
-            keys=[_TOKEN_KEY.format(token_hash), _RATE_KEY.format(token_hash[:12], window)], args=[120]
-        )
+        window = current_window(now)
+        rate_key = counter_key(token_hash[:12], window)
+        result = await self._script(keys=[_TOKEN_KEY.format(token_hash), rate_key])
         if not result:
             raise AuthenticationError("authorization: unknown or revoked token")
-        count, flat = int(result[0]), result[1]
+        shared, flat = int(result[0]), result[1]
         record = {flat[i].decode(): flat[i + 1].decode() for i in range(0, len(flat), 2)}
-        if count > self.limit_per_minute:
-            raise RateLimitedError(retry_after_s=max(1, int((window + 1) * 60 - now) + 1))
+        if self.counter.count(rate_key, shared) > self.limit_per_minute:
+            raise RateLimitedError(retry_after_s=retry_after_s(window, now))
         return Principal(
             owner=record["owner"], scopes=frozenset(record["scopes"].split(",")), token_id=record["id"]
         )
+
+    async def aclose(self) -> None:
+        await self.counter.aclose()
 
 
 def ensure_admin_token(client: redis.Redis, token_path: Path) -> str:

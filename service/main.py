@@ -46,6 +46,7 @@ def create_app(settings: Settings) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         yield
+        await app.state.authenticator.aclose()  # writes the request counts still pending
         await app.state.aredis.aclose()
         app.state.redis.close()
 

@@ -13,6 +13,7 @@ import httpx
 import pytest
 
 from service.auth import TokenRegistry
+from service.rate_limit import counter_key
 from tests.service.conftest import LiveService, http_get, tiny_scene
 
 
@@ -181,12 +182,37 @@ def test_rate_limit_answers_429(live_service: LiveService) -> None:
     limit = live_service.settings.rate_limit_per_minute
     # Pre-fill this minute's counter to just below the limit; the limit is then hit within two requests.
     window = int(time.time() // 60)
-    live_service.redis.set(f"hgrender:ratelimit:{info.id}:{window}", limit - 1, ex=120)
-    live_service.redis.set(f"hgrender:ratelimit:{info.id}:{window + 1}", limit - 1, ex=180)
+    live_service.redis.set(counter_key(info.id, window), limit - 1, ex=120)
+    live_service.redis.set(counter_key(info.id, window + 1), limit - 1, ex=180)
     statuses = [http_get(live_service, "/v1/jobs", token=secret).status_code for _ in range(2)]
     assert statuses == [200, 429]
     response = http_get(live_service, "/v1/jobs", token=secret)
     assert response.status_code == 429 and int(response.headers["retry-after"]) >= 1
+
+
+def test_rate_limit_counts_reach_the_shared_counter(live_service: LiveService) -> None:
+    """Requests are written to Redis in batches (service.rate_limit): every one arrives there, so other
+    API processes see them, and what other processes counted limits this one."""
+    secret, info = TokenRegistry(live_service.redis).create("judy", ("read",))
+    requests = 7
+    windows = {int(time.time() // 60)}
+    for _ in range(requests):
+        assert http_get(live_service, "/v1/jobs", token=secret).status_code == 200
+    windows.add(int(time.time() // 60))  # the requests may straddle a minute boundary
+
+    def shared_count() -> int:
+        return sum(int(live_service.redis.get(counter_key(info.id, w)) or 0) for w in windows)
+
+    deadline = time.monotonic() + 5
+    while shared_count() < requests and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert shared_count() == requests
+    # Another process counted the rest of this minute's (and the next's) allowance: this one must refuse.
+    limit = live_service.settings.rate_limit_per_minute
+    window = int(time.time() // 60)
+    for w in (window, window + 1):
+        live_service.redis.incrby(counter_key(info.id, w), limit)
+    assert http_get(live_service, "/v1/jobs", token=secret).status_code == 429
 
 
 def test_health_readiness_metrics_schema(live_service: LiveService) -> None:
