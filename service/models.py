@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from hgcore.jobs.status import JobStatus, Priority
 from hgcore.jobs.views import JobView
+from schemas import build
 
 
 class JobOptions(BaseModel):
@@ -36,42 +37,18 @@ class JobOptions(BaseModel):
     name: str | None = Field(None, max_length=200, description="Free-form label shown in listings.")
 
 
-EXAMPLE_SCENE: dict[str, Any] = {
-    "schema": "hgrender/scene/v1",
-    "name": "lit floor",
-    "camera": {
-        "type": "perspective",
-        "origin_m": [0, 1, 3],
-        "target_m": [0, 0, 0],
-        "up": [0, 1, 0],
-        "fov_deg": 40,
-    },
-    "film": {"width": 32, "height": 32, "bands": 8, "spp": 16},
-    "materials": {"white": {"type": "diffuse", "reflectance": 0.75}},
-    "shapes": [
-        {
-            "type": "rectangle",
-            "material": "white",
-            "center_m": [0, 0, 0],
-            "normal": [0, 1, 0],
-            "up": [0, 0, -1],
-            "width_m": 2,
-            "height_m": 2,
-        }
+EXAMPLE_SCENE: dict[str, Any] = build.scene(
+    "lit floor",
+    camera=build.camera([0, 1, 3], [0, 0, 0], up=[0, 1, 0], fov_deg=40),
+    film=build.film(32, bands=8, spp=16),
+    materials={"white": {"type": "diffuse", "reflectance": 0.75}},
+    shapes=[build.rectangle([0, 0, 0], normal=[0, 1, 0], up=[0, 0, -1], width_m=2, material="white")],
+    emitters=[
+        build.rectangle(
+            [0, 1.5, 0], normal=[0, -1, 0], up=[0, 0, -1], width_m=0.5, spectrum={"type": "d65"}, power_w=40.0
+        )
     ],
-    "emitters": [
-        {
-            "type": "rectangle",
-            "center_m": [0, 1.5, 0],
-            "normal": [0, -1, 0],
-            "up": [0, 0, -1],
-            "width_m": 0.5,
-            "height_m": 0.5,
-            "spectrum": {"type": "d65"},
-            "power_w": 40.0,
-        }
-    ],
-}
+)
 """A small valid scene (a lit floor) for the OpenAPI examples."""
 
 

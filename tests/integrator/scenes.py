@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from schemas import build
+
 
 def plane_under_source(
     source: dict[str, Any], *, size_px: int = 24, spp: int = 8, camera_height_m: float = 3.0
@@ -13,28 +15,15 @@ def plane_under_source(
     Nothing but the source lights the plane (the plane cannot see itself), so every diagnostic is the
     source's own coherence at the plane point.
     """
-    return {
-        "schema": "hgrender/scene/v1",
-        "name": "plane under source",
-        "camera": {
-            "type": "perspective",
-            "origin_m": [0.0, 0.0, camera_height_m],
-            "target_m": [0.0, 0.0, 0.0],
-            "up": [0.0, 1.0, 0.0],
-            "fov_deg": 20.0,
-        },
-        "film": {"width": size_px, "height": size_px, "bands": 8, "spp": spp, "max_depth": 3},
-        "materials": {"matte": {"type": "diffuse", "reflectance": 0.8}},
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "matte",
-                "center_m": [0.0, 0.0, 0.0],
-                "normal": [0.0, 0.0, 1.0],
-                "up": [0.0, 1.0, 0.0],
-                "width_m": 4.0,
-                "height_m": 4.0,
-            }
+    return build.scene(
+        "plane under source",
+        camera=build.camera([0.0, 0.0, camera_height_m], [0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0], fov_deg=20.0),
+        film=build.film(size_px, bands=8, spp=spp, max_depth=3),
+        materials={"matte": {"type": "diffuse", "reflectance": 0.8}},
+        shapes=[
+            build.rectangle(
+                [0.0, 0.0, 0.0], normal=[0.0, 0.0, 1.0], up=[0.0, 1.0, 0.0], width_m=4.0, material="matte"
+            )
         ],
-        "emitters": [source],
-    }
+        emitters=[source],
+    )

@@ -34,6 +34,7 @@ from hgcore.optics.thin_film import (
     reflectance_terms,
     transmission_terms,
 )
+from schemas import build
 from worker.render.api import render_scene
 
 THICKNESS_M = 1.0e-6
@@ -49,18 +50,11 @@ COS_T = math.sqrt(1.0 - SIN_T**2)
 def scene(sphere_radius_m: float) -> dict:
     view = (math.sin(math.radians(ANGLE_DEG)), 0.0, math.cos(math.radians(ANGLE_DEG)))
     centre = (-DISTANCE_M * SIN_T, 0.0, -DISTANCE_M * COS_T)
-    return {
-        "schema": "hgrender/scene/v1",
-        "name": "transmission through a coated surface",
-        "camera": {
-            "type": "perspective",
-            "origin_m": list(view),
-            "target_m": [0.0, 0.0, 0.0],
-            "up": [0.0, 1.0, 0.0],
-            "fov_deg": 0.1,
-        },
-        "film": {"width": 2, "height": 2, "bands": 16, "spp": 1024, "max_depth": 3},
-        "materials": {
+    return build.scene(
+        "transmission through a coated surface",
+        camera=build.camera(view, [0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0], fov_deg=0.1),
+        film=build.film(2, bands=16, spp=1024, max_depth=3),
+        materials={
             "coated": {
                 "type": "thin_film",
                 "film_thickness_um": THICKNESS_M * 1e6,
@@ -70,27 +64,17 @@ def scene(sphere_radius_m: float) -> dict:
                 "beams": BEAMS,
             }
         },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "coated",
-                "center_m": [0.0, 0.0, 0.0],
-                "normal": [0.0, 0.0, 1.0],
-                "up": [0.0, 1.0, 0.0],
-                "width_m": 2.0,
-                "height_m": 2.0,
-            }
+        shapes=[
+            build.rectangle(
+                [0.0, 0.0, 0.0], normal=[0.0, 0.0, 1.0], up=[0.0, 1.0, 0.0], width_m=2.0, material="coated"
+            )
         ],
-        "emitters": [
-            {
-                "type": "sphere",
-                "center_m": list(centre),
-                "radius_m": sphere_radius_m,
-                "spectrum": {"type": "constant", "value": 1.0},
-                "radiance_scale": 1.0,
-            }
+        emitters=[
+            build.sphere(
+                centre, sphere_radius_m, spectrum={"type": "constant", "value": 1.0}, radiance_scale=1.0
+            )
         ],
-    }
+    )
 
 
 def expected_band_values(sphere_radius_m: float, edges_nm: np.ndarray) -> np.ndarray:

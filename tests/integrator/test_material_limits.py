@@ -15,53 +15,30 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
+from schemas import build
 from worker.render.api import render_scene
 
-BOX = {
-    "schema": "hgrender/scene/v1",
-    "name": "object in a box",
-    "camera": {
-        "type": "perspective",
-        "origin_m": [0.0, 0.0, 3.0],
-        "target_m": [0.0, 0.0, 0.0],
-        "fov_deg": 40.0,
-    },
-    "film": {"width": 24, "height": 24, "bands": 4, "spp": 64, "max_depth": 6},
-    "materials": {"wall": {"type": "diffuse", "reflectance": 0.7}},
-    "shapes": [
-        {
-            "type": "rectangle",
-            "material": "wall",
-            "center_m": [0, -1, 0],
-            "normal": [0, 1, 0],
-            "up": [0, 0, -1],
-            "width_m": 2,
-            "height_m": 2,
-        },
-        {
-            "type": "rectangle",
-            "material": "wall",
-            "center_m": [0, 0, -1],
-            "normal": [0, 0, 1],
-            "up": [0, 1, 0],
-            "width_m": 2,
-            "height_m": 2,
-        },
-        {"type": "sphere", "material": "object", "center_m": [0, -0.4, 0], "radius_m": 0.5},
+BOX = build.scene(
+    "object in a box",
+    camera=build.camera([0.0, 0.0, 3.0], [0.0, 0.0, 0.0], fov_deg=40.0),
+    film=build.film(24, bands=4, spp=64, max_depth=6),
+    materials={"wall": {"type": "diffuse", "reflectance": 0.7}},
+    shapes=[
+        build.rectangle([0, -1, 0], normal=[0, 1, 0], up=[0, 0, -1], width_m=2, material="wall"),
+        build.rectangle([0, 0, -1], normal=[0, 0, 1], up=[0, 1, 0], width_m=2, material="wall"),
+        build.sphere([0, -0.4, 0], 0.5, material="object"),
     ],
-    "emitters": [
-        {
-            "type": "rectangle",
-            "center_m": [0, 0.99, 0],
-            "normal": [0, -1, 0],
-            "up": [0, 0, 1],
-            "width_m": 0.6,
-            "height_m": 0.6,
-            "spectrum": {"type": "d65"},
-            "radiance_scale": 5.0,
-        }
+    emitters=[
+        build.rectangle(
+            [0, 0.99, 0],
+            normal=[0, -1, 0],
+            up=[0, 0, 1],
+            width_m=0.6,
+            spectrum={"type": "d65"},
+            radiance_scale=5.0,
+        )
     ],
-}
+)
 
 
 def render_bands(material: dict, tmp_path: Path, name: str, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -15,56 +15,32 @@ from pathlib import Path
 import numpy as np
 
 from hgcore.artifacts.exr import read_exr
+from schemas import build
 from worker.render.api import render_scene
 
-SCENE = {
-    "schema": "hgrender/scene/v1",
-    "name": "floor lit by a wall",
-    "camera": {
-        "type": "perspective",
-        "origin_m": [1.5, 2.0, 0.0],
-        "target_m": [1.5, 0.0, 0.0],
-        "up": [0, 0, -1],
-        "fov_deg": 30.0,
-    },
-    "film": {"width": 16, "height": 16, "bands": 4, "spp": 16, "max_depth": 3},
-    "materials": {
+SCENE = build.scene(
+    "floor lit by a wall",
+    camera=build.camera([1.5, 2.0, 0.0], [1.5, 0.0, 0.0], up=[0, 0, -1], fov_deg=30.0),
+    film=build.film(16, bands=4, spp=16, max_depth=3),
+    materials={
         "floor": {"type": "diffuse", "reflectance": 0.5},
         "wall": {"type": "diffuse", "reflectance": 0.8, "scattering_region_radius_m": 0.001},
     },
-    "shapes": [
-        {
-            "type": "rectangle",
-            "material": "floor",
-            "center_m": [1.0, 0.0, 0.0],
-            "normal": [0, 1, 0],
-            "up": [0, 0, -1],
-            "width_m": 4.0,
-            "height_m": 4.0,
-        },
-        {
-            "type": "rectangle",
-            "material": "wall",
-            "center_m": [-0.5, 1.0, 0.0],
-            "normal": [1, 0, 0],
-            "up": [0, 1, 0],
-            "width_m": 2.0,
-            "height_m": 2.0,
-        },
+    shapes=[
+        build.rectangle([1.0, 0.0, 0.0], normal=[0, 1, 0], up=[0, 0, -1], width_m=4.0, material="floor"),
+        build.rectangle([-0.5, 1.0, 0.0], normal=[1, 0, 0], up=[0, 1, 0], width_m=2.0, material="wall"),
     ],
-    "emitters": [
-        {
-            "type": "rectangle",
-            "center_m": [0.5, 1.0, 0.0],
-            "normal": [-1, 0, 0],
-            "up": [0, 1, 0],
-            "width_m": 0.3,
-            "height_m": 0.3,
-            "spectrum": {"type": "d65"},
-            "radiance_scale": 10.0,
-        }
+    emitters=[
+        build.rectangle(
+            [0.5, 1.0, 0.0],
+            normal=[-1, 0, 0],
+            up=[0, 1, 0],
+            width_m=0.3,
+            spectrum={"type": "d65"},
+            radiance_scale=10.0,
+        )
     ],
-}
+)
 
 
 def diagnostics(radius_m: float, tmp_path: Path) -> dict[str, np.ndarray]:

@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
+from schemas import build
 from worker.render.api import render_scene
 
 K_PER_M = 2 * math.pi / 550e-9
@@ -35,54 +36,31 @@ UP = np.array([0.0, 1.0, 0.0])
 
 
 def scene(side_m: float, receiver_x_m: float) -> dict:
-    return {
-        "schema": "hgrender/scene/v1",
-        "name": "floor lit by a diffuse square",
-        "camera": {
-            "type": "perspective",
-            "origin_m": [receiver_x_m, 0.3, 0.0],
-            "target_m": [receiver_x_m, 0.0, 0.0],
-            "up": [0, 0, -1],
-            "fov_deg": 4.0,
-        },
-        "film": {"width": 6, "height": 6, "bands": 4, "spp": 65536, "max_depth": 3},
-        "materials": {
+    return build.scene(
+        "floor lit by a diffuse square",
+        camera=build.camera([receiver_x_m, 0.3, 0.0], [receiver_x_m, 0.0, 0.0], up=[0, 0, -1], fov_deg=4.0),
+        film=build.film(6, bands=4, spp=65536, max_depth=3),
+        materials={
             "floor": {"type": "diffuse", "reflectance": 0.5},
             "square": {"type": "diffuse", "reflectance": 0.8},
         },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "floor",
-                "center_m": [receiver_x_m, 0.0, 0.0],
-                "normal": [0, 1, 0],
-                "up": [0, 0, -1],
-                "width_m": 0.5,
-                "height_m": 0.5,
-            },
-            {
-                "type": "rectangle",
-                "material": "square",
-                "center_m": PATCH_CENTRE.tolist(),
-                "normal": [1, 0, 0],
-                "up": [0, 1, 0],
-                "width_m": side_m,
-                "height_m": side_m,
-            },
+        shapes=[
+            build.rectangle(
+                [receiver_x_m, 0.0, 0.0], normal=[0, 1, 0], up=[0, 0, -1], width_m=0.5, material="floor"
+            ),
+            build.rectangle(PATCH_CENTRE, normal=[1, 0, 0], up=[0, 1, 0], width_m=side_m, material="square"),
         ],
-        "emitters": [
-            {
-                "type": "rectangle",
-                "center_m": EMITTER_CENTRE.tolist(),
-                "normal": EMITTER_NORMAL.tolist(),
-                "up": UP.tolist(),
-                "width_m": EMITTER_SIDE_M,
-                "height_m": EMITTER_SIDE_M,
-                "spectrum": {"type": "d65"},
-                "radiance_scale": 10.0,
-            }
+        emitters=[
+            build.rectangle(
+                EMITTER_CENTRE,
+                normal=EMITTER_NORMAL,
+                up=UP,
+                width_m=EMITTER_SIDE_M,
+                spectrum={"type": "d65"},
+                radiance_scale=10.0,
+            )
         ],
-    }
+    )
 
 
 def vcz_coherence_lengths_um(side_m: float, receiver_x_m: float, nodes: int = 160) -> np.ndarray:

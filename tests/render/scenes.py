@@ -6,7 +6,7 @@ import json
 import math
 from typing import Any
 
-from schemas import EXAMPLES_DIR
+from schemas import EXAMPLES_DIR, build
 
 
 def example(name: str, **film: Any) -> dict[str, Any]:
@@ -31,56 +31,36 @@ def mirror_room(
     Built so that no surface is ever seen from behind (Mitsuba's BSDFs are one-sided, ``hg_path``'s are
     two-sided): the floor (y = 0, facing up) ends at the mirror (z = −0.5, facing +z), nothing behind either.
     """
-    scene: dict[str, Any] = {
-        "schema": "hgrender/scene/v1",
-        "name": "mirror room",
-        "camera": {
-            "type": "perspective",
-            "origin_m": [0.0, 0.5, 1.6],
-            "target_m": [0.0, 0.25, -0.2],
-            "up": [0.0, 1.0, 0.0],
-            "fov_deg": 45.0,
-        },
-        "film": {"width": size_px, "height": size_px, "bands": bands, "spp": spp, "max_depth": max_depth},
-        "materials": {
+    scene = build.scene(
+        "mirror room",
+        camera=build.camera([0.0, 0.5, 1.6], [0.0, 0.25, -0.2], up=[0.0, 1.0, 0.0], fov_deg=45.0),
+        film=build.film(size_px, bands=bands, spp=spp, max_depth=max_depth),
+        materials={
             "floor": {"type": "diffuse", "reflectance": 0.6},
             "mirror": {"type": "mirror", "conductor": "perfect"},
         },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "floor",
-                "center_m": [0.0, 0.0, 0.1],
-                "normal": [0.0, 1.0, 0.0],
-                "up": [0.0, 0.0, -1.0],
-                "width_m": 1.2,
-                "height_m": 1.2,
-            },
-            {
-                "type": "rectangle",
-                "material": "mirror",
-                "center_m": [0.0, 0.4, -0.5],
-                "normal": [0.0, 0.0, 1.0],
-                "up": [0.0, 1.0, 0.0],
-                "width_m": 1.2,
-                "height_m": 0.8,
-            },
+        shapes=[
+            build.rectangle(
+                [0.0, 0.0, 0.1], normal=[0.0, 1.0, 0.0], up=[0.0, 0.0, -1.0], width_m=1.2, material="floor"
+            ),
+            build.rectangle(
+                [0.0, 0.4, -0.5],
+                normal=[0.0, 0.0, 1.0],
+                up=[0.0, 1.0, 0.0],
+                width_m=1.2,
+                height_m=0.8,
+                material="mirror",
+            ),
         ],
-        "emitters": [
-            {
-                "type": "sphere",
-                "center_m": [0.25, 0.45, 0.1],
-                "radius_m": 0.08,
-                "spectrum": {"type": "blackbody", "temperature_k": 4500.0},
-                "power_w": 20.0,
-            }
+        emitters=[
+            build.sphere(
+                [0.25, 0.45, 0.1], 0.08, spectrum={"type": "blackbody", "temperature_k": 4500.0}, power_w=20.0
+            )
         ],
-    }
+    )
     if glass_sphere:
         scene["materials"]["glass"] = {"type": "dielectric", "ior": 1.5}
-        scene["shapes"].append(
-            {"type": "sphere", "material": "glass", "center_m": [-0.15, 0.15, 0.1], "radius_m": 0.15}
-        )
+        scene["shapes"].append(build.sphere([-0.15, 0.15, 0.1], 0.15, material="glass"))
     return scene
 
 
@@ -124,25 +104,14 @@ def two_beam_coating(
 
 
 # A 0.5 m coated square in the z = 0 plane, facing +z.
-COATED_PLANE = {
-    "type": "rectangle",
-    "material": "coating",
-    "center_m": [0.0, 0.0, 0.0],
-    "normal": [0.0, 0.0, 1.0],
-    "up": [0.0, 1.0, 0.0],
-    "width_m": 0.5,
-    "height_m": 0.5,
-}
+COATED_PLANE = build.rectangle(
+    [0.0, 0.0, 0.0], normal=[0.0, 0.0, 1.0], up=[0.0, 1.0, 0.0], width_m=0.5, material="coating"
+)
 
 
 def fig7_sphere_light() -> dict[str, Any]:
     """The paper's sphere source (radius 0.6 cm), 17.5 cm from the highlight: coherence ≈ 5 µm."""
-    return {
-        "type": "sphere",
-        "center_m": list(FIG7_LIGHT_CENTER_M),
-        "radius_m": 0.006,
-        **constant_spectrum(FIG7_POWER_W),
-    }
+    return build.sphere(FIG7_LIGHT_CENTER_M, 0.006, **constant_spectrum(FIG7_POWER_W))
 
 
 def fig7_cylinder_light(length_m: float = 0.3) -> dict[str, Any]:
@@ -164,30 +133,14 @@ def fig7_coated_sphere(light: dict[str, Any], *, spp: int) -> dict[str, Any]:
     next-event estimation sees with the emitter's coherence; two beams, the paper's Eq. (18). The 32×12 px
     film frames the highlight (normals within ≈ ±25° of the camera-light bisector).
     """
-    return {
-        "schema": "hgrender/scene/v1",
-        "name": "Fig. 7 coated sphere",
-        "camera": {
-            "type": "perspective",
-            "origin_m": list(FIG7_CAMERA_ORIGIN_M),
-            "target_m": [0.0, 0.011, 0.0487],
-            "up": [0.0, 1.0, 0.0],
-            "fov_deg": 6.5,
-        },
-        "film": fringe_film(32, 12, spp=spp, max_depth=2),
-        "materials": {
-            "coating": two_beam_coating(FIG7_FILM, roughness_rms_um=0.15, correlation_length_um=1.0)
-        },
-        "shapes": [
-            {
-                "type": "sphere",
-                "material": "coating",
-                "center_m": [0.0, 0.0, 0.0],
-                "radius_m": FIG7_SPHERE_RADIUS_M,
-            }
-        ],
-        "emitters": [light],
-    }
+    return build.scene(
+        "Fig. 7 coated sphere",
+        camera=build.camera(FIG7_CAMERA_ORIGIN_M, [0.0, 0.011, 0.0487], up=[0.0, 1.0, 0.0], fov_deg=6.5),
+        film=fringe_film(32, 12, spp=spp, max_depth=2),
+        materials={"coating": two_beam_coating(FIG7_FILM, roughness_rms_um=0.15, correlation_length_um=1.0)},
+        shapes=[build.sphere([0.0, 0.0, 0.0], FIG7_SPHERE_RADIUS_M, material="coating")],
+        emitters=[light],
+    )
 
 
 # --- Fig. 1(f) / Eq. (20): a DVD grating under a small vs a large source --------------------------------
@@ -211,18 +164,13 @@ def dvd_under_sphere(radius_m: float, *, spp: int) -> dict[str, Any]:
         GRATING_LIGHT_DISTANCE_M * math.cos(elevation),
         0.0,
     ]
-    return {
-        "schema": "hgrender/scene/v1",
-        "name": "DVD grating",
-        "camera": {
-            "type": "perspective",
-            "origin_m": [0.0, GRATING_CAMERA_HEIGHT_M, 0.0],
-            "target_m": [0.0, 0.0, 0.0],
-            "up": [0.0, 0.0, -1.0],
-            "fov_deg": 30.0,
-        },
-        "film": {"width": 32, "height": 32, "bands": 8, "spp": spp, "max_depth": 2},
-        "materials": {
+    return build.scene(
+        "DVD grating",
+        camera=build.camera(
+            [0.0, GRATING_CAMERA_HEIGHT_M, 0.0], [0.0, 0.0, 0.0], up=[0.0, 0.0, -1.0], fov_deg=30.0
+        ),
+        film=build.film(32, bands=8, spp=spp, max_depth=2),
+        materials={
             "dvd": {
                 "type": "grating",
                 "preset": "dvd",
@@ -231,19 +179,13 @@ def dvd_under_sphere(radius_m: float, *, spp: int) -> dict[str, Any]:
                 "lobe_width_per_um": 0.05,
             }
         },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "dvd",
-                "center_m": [0.0, 0.0, 0.0],
-                "normal": [0.0, 1.0, 0.0],
-                "up": [0.0, 0.0, -1.0],
-                "width_m": 0.3,
-                "height_m": 0.3,
-            }
+        shapes=[
+            build.rectangle(
+                [0.0, 0.0, 0.0], normal=[0.0, 1.0, 0.0], up=[0.0, 0.0, -1.0], width_m=0.3, material="dvd"
+            )
         ],
-        "emitters": [{"type": "sphere", "center_m": light, "radius_m": radius_m, **constant_spectrum(5.0)}],
-    }
+        emitters=[build.sphere(light, radius_m, **constant_spectrum(5.0))],
+    )
 
 
 # --- Fig. 8: a coated plane lit directly vs through a mirror -----------------------------------------
@@ -269,44 +211,27 @@ def fig8_coated_plane(*, via_mirror: bool, spp: int) -> dict[str, Any]:
         light_center = [mirror_center[0], mirror_center[1] + FIG8_SECOND_LEG_M, mirror_center[2]]
     else:
         light_center = mirror_center
-    scene = {
-        "schema": "hgrender/scene/v1",
-        "name": "Fig. 8 coated plane",
-        "camera": {
-            "type": "perspective",
-            "origin_m": [-FIG8_FIRST_LEG_M * math.sin(theta), 0.0, FIG8_FIRST_LEG_M * math.cos(theta)],
-            "target_m": [0.0, 0.0, 0.0],
-            "up": [0.0, 1.0, 0.0],
-            "fov_deg": 4.0,
-        },
-        "film": fringe_film(8, 8, spp=spp, max_depth=3),
-        "materials": {
+    scene = build.scene(
+        "Fig. 8 coated plane",
+        camera=build.camera(
+            [-FIG8_FIRST_LEG_M * math.sin(theta), 0.0, FIG8_FIRST_LEG_M * math.cos(theta)],
+            [0.0, 0.0, 0.0],
+            up=[0.0, 1.0, 0.0],
+            fov_deg=4.0,
+        ),
+        film=fringe_film(8, 8, spp=spp, max_depth=3),
+        materials={
             "coating": two_beam_coating(FIG8_FILM, roughness_rms_um=0.15, correlation_length_um=2.0),
             "mirror": {"type": "mirror", "conductor": "perfect"},
         },
-        "shapes": [COATED_PLANE],
-        "emitters": [
-            {
-                "type": "sphere",
-                "center_m": light_center,
-                "radius_m": FIG8_LIGHT_RADIUS_M,
-                **constant_spectrum(10.0),
-            }
-        ],
-    }
+        shapes=[COATED_PLANE],
+        emitters=[build.sphere(light_center, FIG8_LIGHT_RADIUS_M, **constant_spectrum(10.0))],
+    )
     if via_mirror:
         # The mirror's normal bisects the directions to the plane and to the light (up).
         normal = [-towards_light[0], 1.0, -towards_light[2]]
         scene["shapes"].append(
-            {
-                "type": "rectangle",
-                "material": "mirror",
-                "center_m": mirror_center,
-                "normal": normal,
-                "up": [1.0, 0.0, 0.0],
-                "width_m": 0.25,
-                "height_m": 0.25,
-            }
+            build.rectangle(mirror_center, normal=normal, up=[1.0, 0.0, 0.0], width_m=0.25, material="mirror")
         )
     return scene
 
@@ -318,27 +243,18 @@ def smooth_coated_plane_mirroring_light(*, spp: int) -> dict[str, Any]:
     camera sits in the mirror direction with a 1° field, so every pixel's reflected ray ends on the light.
     """
     theta = math.radians(20.0)
-    return {
-        "schema": "hgrender/scene/v1",
-        "name": "smooth coated plane",
-        "camera": {
-            "type": "perspective",
-            "origin_m": [-0.3 * math.sin(theta), 0.0, 0.3 * math.cos(theta)],
-            "target_m": [0.0, 0.0, 0.0],
-            "up": [0.0, 1.0, 0.0],
-            "fov_deg": 1.0,
-        },
-        "film": fringe_film(8, 8, spp=spp, max_depth=2),
-        "materials": {
-            "coating": two_beam_coating(FIG7_FILM, roughness_rms_um=0.001, correlation_length_um=5.0)
-        },
-        "shapes": [COATED_PLANE],
-        "emitters": [
-            {
-                "type": "sphere",
-                "center_m": [0.3 * math.sin(theta), 0.0, 0.3 * math.cos(theta)],
-                "radius_m": 0.01,
-                **constant_spectrum(10.0),
-            }
+    return build.scene(
+        "smooth coated plane",
+        camera=build.camera(
+            [-0.3 * math.sin(theta), 0.0, 0.3 * math.cos(theta)],
+            [0.0, 0.0, 0.0],
+            up=[0.0, 1.0, 0.0],
+            fov_deg=1.0,
+        ),
+        film=fringe_film(8, 8, spp=spp, max_depth=2),
+        materials={"coating": two_beam_coating(FIG7_FILM, roughness_rms_um=0.001, correlation_length_um=5.0)},
+        shapes=[COATED_PLANE],
+        emitters=[
+            build.sphere([0.3 * math.sin(theta), 0.0, 0.3 * math.cos(theta)], 0.01, **constant_spectrum(10.0))
         ],
-    }
+    )

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hgcore.settings import SceneLimits
-from schemas import SceneError, validate_scene
+from schemas import SceneError, build, validate_scene
 from schemas.procedural import generate_mesh, mesh_size
 from schemas.scene import OpticalDiscShape, ShellShape
 
@@ -58,21 +58,15 @@ SHAPES: dict[str, dict[str, Any]] = {
 
 
 def scene_with(shape: dict[str, Any]) -> dict[str, Any]:
-    return {
-        "schema": "hgrender/scene/v1",
-        "camera": {"origin_m": [0, 0.5, 1.0], "target_m": [0, 0, 0]},
-        "materials": {"m": {"type": "diffuse", "reflectance": 0.5}},
-        "shapes": [{"material": "m", **shape}],
-        "emitters": [
-            {
-                "type": "sphere",
-                "center_m": [0, 1, 0],
-                "radius_m": 0.05,
-                "spectrum": {"type": "d65"},
-                "power_w": 1.0,
-            }
-        ],
-    }
+    scene = build.scene(
+        "",
+        camera=build.camera([0, 0.5, 1.0], [0, 0, 0]),
+        materials={"m": {"type": "diffuse", "reflectance": 0.5}},
+        shapes=[{"material": "m", **shape}],
+        emitters=[build.sphere([0, 1, 0], 0.05, spectrum={"type": "d65"}, power_w=1.0)],
+    )
+    del scene["name"]  # the schema's default name
+    return scene
 
 
 def generated(name: str) -> Any:

@@ -21,6 +21,7 @@ import pytest
 
 from hgcore.artifacts.exr import ExrImage, read_exr
 from hgrender.client import HgrenderClient
+from schemas import build
 from service.redis_server import free_loopback_port
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -34,30 +35,13 @@ SPP = 4
 # plane, so coherence is longest across it: ℓ₁ ∥ d × a. For a = x̂: d × a = (0, d_z, −d_y), whose
 # image-plane (x, −z) components are (0, d_y): vertical (angle ±π/2) at every floor pixel. For
 # a = (x̂ + ẑ)/√2: d × a ∝ (d_y, d_z − d_x, −d_y) → image (d_y, d_y): angle π/4 everywhere.
-CYLINDER_SCENE: dict[str, Any] = {
-    "schema": "hgrender/scene/v1",
-    "name": "plane under a cylinder light",
-    "camera": {
-        "type": "perspective",
-        "origin_m": [0, 1.0, 0],
-        "target_m": [0, 0, 0],
-        "up": [0, 0, -1],
-        "fov_deg": 40,
-    },
-    "film": {"width": SIZE_PX, "height": SIZE_PX, "bands": 8, "spp": SPP},
-    "materials": {"floor": {"type": "diffuse", "reflectance": 0.5}},
-    "shapes": [
-        {
-            "type": "rectangle",
-            "material": "floor",
-            "center_m": [0, 0, 0],
-            "normal": [0, 1, 0],
-            "up": [0, 0, -1],
-            "width_m": 2,
-            "height_m": 2,
-        }
-    ],
-    "emitters": [
+CYLINDER_SCENE: dict[str, Any] = build.scene(
+    "plane under a cylinder light",
+    camera=build.camera([0, 1.0, 0], [0, 0, 0], up=[0, 0, -1], fov_deg=40),
+    film={"width": SIZE_PX, "height": SIZE_PX, "bands": 8, "spp": SPP},
+    materials={"floor": {"type": "diffuse", "reflectance": 0.5}},
+    shapes=[build.rectangle([0, 0, 0], normal=[0, 1, 0], up=[0, 0, -1], width_m=2, material="floor")],
+    emitters=[
         {
             "type": "cylinder",
             "p0_m": [-0.3, 0.5, 0],
@@ -67,7 +51,7 @@ CYLINDER_SCENE: dict[str, Any] = {
             "power_w": 10,
         }
     ],
-}
+)
 
 
 def cylinder_scene(axis_end_m: tuple[float, float] = (0.3, 0.0), **film: Any) -> dict[str, Any]:
