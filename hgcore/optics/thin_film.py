@@ -9,8 +9,10 @@ beams leaving the film are
 with k = 2π/λ (λ the vacuum wavelength, m) and q_1 = n_f cos θ_t the film's normal factor (complex beyond the
 film's critical angle, where e^{iδ} then decays). Beams p and q have travelled through the film a
 different number of times; the incident light's degree of coherence between them is V_{|p−q|}, the value of
-the incident HG function at the transverse separation |p−q|·τ·ẑ (Theorem 5.1(i); Eq. (18) is the two-beam
-case I_1 + I_2 + 2√(I_1 I_2)·V·cos(τφ_z)). The partially-coherent reflectance is
+the incident HG function at the transverse part of |p−q|·s, s the lateral shear of one round trip
+(:func:`film_shear`, |s| = 2τ tan θ_t; Theorem 5.1(i) with the separation of the refracted path rather than
+Eq. (18)'s τẑ — docs/physics_interactions.md §3; Eq. (18) is the two-beam case
+I_1 + I_2 + 2√(I_1 I_2)·V·cos(τφ_z)). The partially-coherent reflectance is
 
     R = Σ_{p,q<P} a_p a_q* V_{|p−q|} = Σ_p |a_p|² + 2 Σ_{d≥1} V_d Re Σ_p a_{p+d} a_p*,    V_0 = 1,
 
@@ -165,6 +167,47 @@ def thin_film_reflectance(
         ops,
     )
     return combine_reflectance_terms(reflectance_terms(amplitudes), visibilities)
+
+
+def film_shear(
+    normal: Any,
+    incident_direction: Any,
+    thickness_m: Any,
+    film_ior: Any,
+    incident_ior: Any,
+    ops: ArrayOps,
+) -> tuple[Any, Any, Any]:
+    """World-space shear s (m) between successive beams of the film: beam p + 1 leaves the top surface at
+    Q = P + s, where beam p left (and where the incident ray that beam p + 1 came from entered) at P.
+
+    ``normal`` is the film's unit normal (either side), ``incident_direction`` the unit propagation direction
+    of the incident light k̂ (towards the surface), ``film_ior`` n_f and ``incident_ior`` n_0 real, the
+    index of the medium k̂ travels in (the exterior, or the substrate for light transmitted up through it). One
+    round trip through the film (thickness τ) at the refraction angle θ_t, n_0 sin θ_0 = n_f sin θ_t, moves
+    the beam along the surface by 2τ tan θ_t in the plane of incidence, in the direction of k̂'s tangential
+    part k̂_t = k̂ − (k̂·n̂)n̂ (|k̂_t| = sin θ_0):
+
+        s = 2τ tan θ_t · k̂_t/|k̂_t| = (2τ n_0 / (n_f cos θ_t)) · k̂_t          (no division by sin θ_0).
+
+    The light reflected at Q along the outgoing direction is the sum of beam 0, incident at Q, and beam 1,
+    incident at P = Q − s; they interfere with the incident field's mutual coherence between P and Q, i.e.
+    with μ at the projection of s on the plane transverse to k̂ (length 2τ tan θ_t cos θ_0, in the plane of
+    incidence; the longitudinal part 2τ tan θ_t sin θ_0 is part of the optical path difference 2 n_f τ cos θ_t
+    already in the film phase δ). Beam p + d is sheared by d·s from beam p (``V_d``); the transmitted beams
+    of a film on a dielectric enter at the same points, so the same s serves transmission.
+    docs/physics_interactions.md §3 compares this with Eq. (18)'s reading τ sin θ_0 (the projection of τn̂).
+    Beyond the film's critical angle (n_0 sin θ_0 ≥ n_f) no beam propagates in the film: s = 0 there (the
+    later beams' amplitudes vanish with e^{iδ}).
+    """
+    along = incident_direction[0] * normal[0] + incident_direction[1] * normal[1]
+    along = along + incident_direction[2] * normal[2]
+    tangential = tuple(incident_direction[i] - along * normal[i] for i in range(3))
+    sin_sq = tangential[0] * tangential[0] + tangential[1] * tangential[1] + tangential[2] * tangential[2]
+    ratio = incident_ior / film_ior
+    cos_t_sq = 1.0 - ratio * ratio * sin_sq
+    propagating = cos_t_sq > 0.0
+    scale = ops.where(propagating, 2.0 * thickness_m * ratio / ops.sqrt(ops.maximum(cos_t_sq, 1e-12)), 0.0)
+    return (scale * tangential[0], scale * tangential[1], scale * tangential[2])
 
 
 def validate_thin_film(thickness_m: float, film_ior: float, exterior_ior: float) -> None:

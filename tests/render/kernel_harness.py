@@ -3,11 +3,17 @@
 A one-material scene is compiled and loaded as the renderer would; ``KernelProbe`` then calls the kernels'
 ``sample`` and ``eval_pdf`` on arrays of local directions with fixed wavelengths, so tests can integrate a
 material's albedo and histogram its sampling exactly as the integrator sees them.
+
+This module is the tests' only contact with the renderer's material code (``worker.render.bsdfs`` and the
+integrator's ``kernels``): when that code moves, only ``KernelProbe.__init__``/``_arrays`` and the two
+kernel calls change here. ``material_adapter`` is the narrow NumPy-in/NumPy-out view the χ² tests use.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -106,3 +112,45 @@ def direction(theta_deg: float, count: int, lower: bool = False) -> np.ndarray:
     theta = math.radians(theta_deg)
     z = -math.cos(theta) if lower else math.cos(theta)
     return np.tile([math.sin(theta), 0.0, z], (count, 1))
+
+
+@dataclass(frozen=True)
+class SampledDirections:
+    """Outcomes of a material's sampler: directions (N, 3), weights f·cos/pdf (N, 4), Dirac flags (N)."""
+
+    wo: np.ndarray
+    weight: np.ndarray
+    dirac: np.ndarray
+
+    @property
+    def rejected(self) -> np.ndarray:
+        """Regular samples the sampler discarded (all weights 0: an evanescent draw, |β_o| ≥ 1)."""
+        return ~self.dirac & np.all(self.weight == 0.0, axis=1)
+
+
+@dataclass(frozen=True)
+class MaterialAdapter:
+    """``sample(uniforms (N, 3))`` and ``pdf(wo (N, 3))`` of one material at a fixed incident direction
+    and a single wavelength carried by all four of the path's wavelength slots (so that the hero-MIS
+    density, the mean over the slots, is the density the hero's sampler draws from)."""
+
+    sample: Callable[[np.ndarray], SampledDirections]
+    pdf: Callable[[np.ndarray], np.ndarray]
+
+
+def material_adapter(
+    material: dict[str, Any], wi: np.ndarray, wavelength_nm: float, probe: KernelProbe | None = None
+) -> MaterialAdapter:
+    """The adapter of ``material`` (a scene ``materials`` entry) for the local incident direction ``wi``."""
+    kernel_probe = probe if probe is not None else KernelProbe(material)
+    wavelengths = np.full(4, float(wavelength_nm))
+    wi = np.asarray(wi, dtype=float)
+
+    def sample(uniforms: np.ndarray) -> SampledDirections:
+        result = kernel_probe.sample(np.tile(wi, (len(uniforms), 1)), wavelengths, uniforms)
+        return SampledDirections(result["wo"], result["weight"], result["delta"])
+
+    def pdf(wo: np.ndarray) -> np.ndarray:
+        return kernel_probe.eval_pdf(np.tile(wi, (len(wo), 1)), wo, wavelengths)[1]
+
+    return MaterialAdapter(sample, pdf)

@@ -21,6 +21,7 @@ from hgcore.colour import ciede2000, linear_srgb_to_lab
 from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.sources import source_coefficients, sphere_covariance_components
+from hgcore.optics.thin_film import film_shear
 from tests.render import scenes
 from tests.render.exr import read_channels, spectral_stack
 from tests.render.fringes import FringeFit, fit_fringe_visibility, two_beam_band_terms
@@ -206,7 +207,8 @@ def test_fig8_direct_fringe_visibility_matches_the_centre_phase_prediction(
     fig8_renders: dict[str, dict[str, np.ndarray]],
 ) -> None:
     """Predicted spectrum R_inc + 2·V(λ)·X₁ at the centre direction's incidence, V(λ) = exp(−½ ξᵀMξ) with
-    ξ = τ·sin θ_i (the separation τ·n̂ projected ⟂ to the beam) and M = (k/r)²·a²/4 (van Cittert–Zernike),
+    ξ = 2τ tan θ_t cos θ_i (the film shear projected ⟂ to the beam, docs/physics_interactions.md §3) and
+    M = (k/r)²·a²/4 (van Cittert–Zernike),
     fitted with the same estimator as the render. Tolerance: 3 standard errors of the render's fit plus
     0.05 for the constant-V linearisation (V varies 0.2–0.6 across the bands)."""
     theta = math.radians(scenes.FIG8_INCIDENCE_DEG)
@@ -215,7 +217,10 @@ def test_fig8_direct_fringe_visibility_matches_the_centre_phase_prediction(
     r_incoherent, x_1 = two_beam_band_terms(
         edges, math.cos(theta), film["thickness_um"] * 1e-6, film["ior"], film["substrate"]
     )
-    separation_m = film["thickness_um"] * 1e-6 * math.sin(theta)
+    # |s_⊥| = 2τ tan θ_t cos θ_i: the film shear (thin_film.film_shear) across the incident beam
+    k_hat = (math.sin(theta), 0.0, -math.cos(theta))
+    shear = film_shear((0.0, 0.0, 1.0), k_hat, film["thickness_um"] * 1e-6, film["ior"], 1.0, NUMPY)
+    separation_m = math.hypot(*shear) * math.cos(theta)
     visibility = degree_of_coherence(
         (separation_m, 0.0),
         sphere_covariance_components(scenes.FIG8_LIGHT_RADIUS_M),
