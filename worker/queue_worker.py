@@ -239,6 +239,10 @@ class RenderWorker(Worker):
         """RQ's heartbeat tick while the work horse runs; after a warm-shutdown request whose grace ran
         out, also stop the horse (``handle_job_failure`` below then hands the chunk back)."""
         super().maintain_heartbeats(job, execution)
+        # RQ keeps a busy worker's own key alive for monitoring interval + 60 s; a worker SIGKILLed mid-chunk
+        # then counted as alive (/readyz, metrics) and blocked its name — a worker restarted under the same
+        # name refuses to start while the key exists — for a minute. Let it lapse with the chunk's heartbeat.
+        self.connection.expire(self.key, self.get_heartbeat_ttl(job))
         # RQ records the warm-shutdown request in these two attributes (request_stop / _shutdown).
         if not self._stop_requested or self._shutdown_requested_date is None:
             return

@@ -190,9 +190,17 @@ def test_sigkill_of_a_whole_worker_is_detected_and_retried(live_service: LiveSer
     index = wait_for(victim_chunk, 60, "the victim to take a chunk")
     wait_for(lambda: float(jobs.chunk_fields(job_id).get(f"{index}.progress", 0)) > 0, 60, "victim rendering")
     horse_pid = int(jobs.chunk_fields(job_id)[f"{index}.pid"])
+    time.sleep(1.5)  # past the victim's first heartbeat tick (monitoring interval 1 s) while it is busy
     os.killpg(victim.pid, signal.SIGKILL)  # the worker and its scheduler child
     os.kill(horse_pid, signal.SIGKILL)  # the horse runs in its own process group
+    killed_at = time.monotonic()
     victim.wait()
+    # The dead worker's key lapses with its chunk's heartbeat (1 + 3 s), not RQ's busy TTL of 61 s: until
+    # then it counts as alive and a worker restarted under its name could not start.
+    wait_for(
+        lambda: not service.redis.exists("rq:worker:victim"), 30, "the dead victim's worker key to lapse"
+    )
+    assert time.monotonic() - killed_at <= 1 + 3 + 2
     final = _assert_succeeded_exactly_once(service, client, job_id)
     assert final["chunks"][int(index)]["attempts"] == 2
     assert final["chunks"][int(index)]["worker"] == "survivor"
