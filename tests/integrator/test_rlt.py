@@ -9,7 +9,7 @@ import pytest
 
 from hgcore.artifacts.exr import read_exr
 from hgcore.artifacts.layout import VARIANCE_EXR
-from tests.render.scenes import constant_spectrum, example
+from tests.render.scenes import COATED_PLANE, constant_spectrum, example
 from worker.render.api import render_scene
 
 
@@ -46,40 +46,21 @@ def coated_plane_under_a_large_source(seed: int) -> dict:
     a 3° field (incidence varies by ±1.5°, the fringe phase by ±0.3 rad), with a constant-spectrum sphere
     of radius 0.2 m centred on the mirror image of the camera, 0.58 m from the plane's centre: every pixel
     sees the sphere by specular reflection."""
+    coating = {"type": "thin_film", "film_thickness_um": 1.23, "film_ior": 1.5, "substrate": {"ior": 2.25}}
     return {
         "schema": "hgrender/scene/v1",
         "name": "coated plane, extended source",
         "camera": {
             "type": "perspective",
-            "origin_m": [0.0, 0.3, 0.5],
+            "origin_m": [-0.5, 0.0, 0.3],
             "target_m": [0.0, 0.0, 0.0],
-            "up": [0.0, 1.0, 0.0],
             "fov_deg": 3,
         },
         "film": {"width": 24, "height": 24, "bands": 16, "spp": 32, "seed": seed},
-        "materials": {
-            "film": {
-                "type": "thin_film",
-                "film_thickness_um": 1.23,
-                "film_ior": 1.5,
-                "substrate": {"ior": 2.25},
-                "roughness_rms_um": 0.005,
-                "correlation_length_um": 5.0,
-            }
-        },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "material": "film",
-                "center_m": [0.0, 0.0, 0.0],
-                "normal": [0.0, 1.0, 0.0],
-                "up": [0.0, 0.0, -1.0],
-                "width_m": 0.4,
-                "height_m": 0.4,
-            }
-        ],
+        "materials": {"coating": {**coating, "roughness_rms_um": 0.005}},
+        "shapes": [COATED_PLANE],
         "emitters": [
-            {"type": "sphere", "center_m": [0.0, 0.3, -0.5], "radius_m": 0.2, **constant_spectrum(50.0)}
+            {"type": "sphere", "center_m": [0.5, 0.0, 0.3], "radius_m": 0.2, **constant_spectrum(50.0)}
         ],
     }
 
