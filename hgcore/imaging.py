@@ -41,17 +41,27 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 
 def display_rgb8(linear_rgb: np.ndarray, exposure_ev: float = 0.0, operator: str = "clamp") -> np.ndarray:
-    """8-bit sRGB for display: exposure, tone mapping, transfer curve, round half up."""
+    """8-bit sRGB for display: exposure, tone mapping, transfer curve, round half up.
+
+    A NaN channel (a renderer sample gone wrong) displays as 0, as the viewer's ``Uint8ClampedArray``
+    stores NaN; casting NaN to uint8 is undefined in NumPy (platform-dependent, with a RuntimeWarning)."""
     if not math.isfinite(exposure_ev):
         raise InputError(f"ev: must be finite, got {exposure_ev}")
     encoded = srgb_encode(tone_map(np.asarray(linear_rgb, dtype=np.float64) * 2.0**exposure_ev, operator))
-    return np.floor(encoded * 255.0 + 0.5).astype(np.uint8)
+    return np.floor(np.where(np.isnan(encoded), 0.0, encoded) * 255.0 + 0.5).astype(np.uint8)
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    """The finite entries of ``values`` (flattened): exposure statistics ignore NaN/inf pixels, which
+    would otherwise make every quantile NaN and drop the whole image to the 0 EV fallback."""
+    flat = np.ravel(values)
+    return flat[np.isfinite(flat)]
 
 
 def auto_exposure_ev(linear_rgb: np.ndarray, percentile: float = 99.0) -> float:
-    """EV that maps the given percentile of luminance to 1 (0 for a black image)."""
-    luminance = np.asarray(linear_rgb, dtype=np.float64) @ REC709_LUMINANCE
-    high = float(np.percentile(luminance, percentile))
+    """EV that maps the given percentile of the finite pixels' luminance to 1 (0 for a black image)."""
+    luminance = _finite(np.asarray(linear_rgb, dtype=np.float64) @ REC709_LUMINANCE)
+    high = float(np.percentile(luminance, percentile)) if luminance.size else 0.0
     return 0.0 if high <= 0 or not math.isfinite(high) else -math.log2(high)
 
 
@@ -68,7 +78,8 @@ def preview_exposure_ev(linear_rgb: np.ndarray, clipped_fraction: float = PREVIE
     channel, so mapping luminance to 1 clips that channel and washes the colour out towards white. With
     this rule at most ``clipped_fraction`` of the pixels (0.2 %: the emitter seen directly, glints) have
     any channel clipped, and every other pixel keeps its hue and saturation under the ``clamp`` tone map.
+    Non-finite pixels are left out of the quantile (see ``_finite``).
     """
-    brightest = np.max(np.maximum(np.asarray(linear_rgb, dtype=np.float64), 0.0), axis=-1)
-    high = float(np.quantile(brightest, 1.0 - clipped_fraction))
+    brightest = _finite(np.max(np.maximum(np.asarray(linear_rgb, dtype=np.float64), 0.0), axis=-1))
+    high = float(np.quantile(brightest, 1.0 - clipped_fraction)) if brightest.size else 0.0
     return 0.0 if high <= 0 or not math.isfinite(high) else -math.log2(high)

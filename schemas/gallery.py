@@ -54,32 +54,43 @@ GALLERY: tuple[GalleryEntry, ...] = (
         "fig7_thin_film_sphere_light",
         "Fig. 7 (left)",
         "10 000 spp, ~4 hours",
-        "A 14.6 cm ribbed silver shell with a 1.23 µm coating, back-lit at grazing incidence by a 0.6 cm "
-        "F11 sphere 60 cm away: interference colours along the lit rim, changing with the angle. They are "
-        "faint in today's renderer (faint pink and blue segments in a warm-white band; the rim's spectral "
-        "contrast is measurable, 0.04, but small).",
+        "A 14.6 cm ribbed silver shell with a 0.40 µm coating of index 2.0 (orders 1–3 across the visible), "
+        "lit from behind at 50° elevation by a 0.6 cm F11 sphere 30 cm away and seen from the mirror "
+        "direction, so the rough coating's highlight covers the shell's back: white at its centre, golden "
+        "brown towards its edges as the angle changes the film's phase (the ribs are too shallow to read "
+        "in this light). The sphere's coherence "
+        "(ℓ = 2r/(ka) ≈ 8 µm) dwarfs the film's sub-µm shear, so these are the film's fully coherent "
+        "colours — and on silver they are pastel: a lossless film over a near-perfect reflector keeps "
+        "R between 0.70 and 0.99 (n = 2, θ ≤ 70°; 0.82–0.98 for n = 1.5), so no thickness gives "
+        "saturated colours; n = 2 and 0.4 µm give about twice the modulation of the paper's 1.23 µm, n = 1.5 "
+        "(the paper's Fig. 7 is more colourful than that bound allows).",
         "image",
     ),
     GalleryEntry(
         "fig7_thin_film_cylinder_light",
         "Fig. 7 (right)",
         "10 000 spp, ~4 hours",
-        "The same shell under a 20 cm × 0.1 cm tube of the same spectrum and power: the tube's coherence "
-        "is long across its axis and short along it (here ℓ₂ = 0.88 µm = r√12/(kL), as Eq. 14 gives), so "
-        "fringes survive only where the normal is perpendicular to the axis — which is where this framing's "
-        "lit rim is (|n_x| < 0.15), so the band keeps its colours but is noisier (the tube is harder to "
-        "sample than the sphere). Open it in the viewer: the ellipses show the anisotropy.",
+        "The same shell under a 40 cm × 0.1 cm F11 tube (same spectrum and power) along x at the same "
+        "place: its coherence is long across its axis (ℓ₁ ≈ 12 µm) and short along it (ℓ₂ = 0.21 µm = "
+        "r√12/(kL), Eq. 14, as measured), shorter than the film's shear τ sin θ ≈ 0.26 µm, so Eq. 18 "
+        "keeps the fringes where the normal is perpendicular to the axis (the shell's crest, |n_x| small)"
+        " and fades them where it tilts along it (the ends); at 512², 128 spp that difference is below "
+        "the noise. The coloured speckle is Monte Carlo noise of the tube's sampling (each sample carries"
+        " 4 wavelengths, so radiometric noise shows as colour). Open it in the viewer: the ellipses show "
+        "the anisotropy (ℓ₁/ℓ₂ ≈ 55).",
         "ellipses",
     ),
     GalleryEntry(
         "fig8_mirror_coherence",
         "Fig. 8 (left)",
         "8192 spp",
-        "A coated gold shell lit directly on its left flank and via a silver mirror (top right) on its "
-        "right: the mirror keeps the coherence and adds path length (r = 0.81 m instead of 0.53 m), so the "
-        "right flank receives 1.5× longer coherence (ℓ = 2r/(ka): 4.7 vs 3.0 µm) and would show the more "
-        "pronounced interference; at this spp the mirror-fed flank is still a sparse caustic. The rough "
-        "copper neighbour (lower left) diffuses weakly coherent light.",
+        "A coated gold shell (2 µm film) lit directly on its left flank and via a silver mirror (top "
+        "right) on its right by a 9 cm sphere: the mirror keeps the coherence and adds path length "
+        "(r = 0.81 m instead of 0.54 m), so the right flank receives 1.5× longer coherence (ℓ = 2r/(ka): "
+        "1.6 vs 1.05 µm, against a film shear of 1–1.5 µm), so Eq. 18 gives it the more pronounced "
+        "interference. The larger source (9 cm, was 3 cm) is what lets the path tracer find the mirror "
+        "path: the mirror-fed flank is now a filled yellow-green highlight (grainy at its rim), not a "
+        "sparse caustic. The rough copper neighbour (lower left) diffuses weakly coherent light.",
         "ellipses",
     ),
     GalleryEntry(

@@ -27,6 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 GALLERY_DIR = ROOT / "gallery"
 DOCS_IMAGES_DIR = ROOT / "docs" / "gallery"
 DOC_PATH = ROOT / "docs" / "gallery.md"
+#: ``bench/bench_convergence.py``'s results, summarised in the doc's last section when present.
+CONVERGENCE_JSON = ROOT / "bench" / "results" / "convergence.json"
 PUBLICATION_SIZE_PX = 512
 PUBLICATION_SPP = 256
 #: Chunks a gallery render is split into: progress is reported after each.
@@ -117,7 +119,56 @@ def write_doc(summaries: dict[str, dict[str, Any]]) -> None:
         else:
             lines += [f"Not rendered yet (paper: {entry.paper_time}).", ""]
         lines += [f"What to look for: {entry.look_for}", ""]
+    lines += convergence_section()
     atomic_write_bytes(DOC_PATH, "\n".join(lines).encode())
+
+
+def convergence_section(path: Path = CONVERGENCE_JSON) -> list[str]:
+    """The doc's "PLT vs RLT" section from ``bench/bench_convergence.py``'s results (none without them):
+    the plot and, per scene and integrator, where ΔE₀₀ p95 first falls below 1."""
+    if not path.is_file():
+        return []
+    results = json.loads(path.read_text())
+    lines = [
+        "## PLT (`hg_path`) vs RLT (`rlt`): error vs spp and time",
+        "",
+        "`python -m bench.bench_convergence` (results: `bench/results/convergence.json`): each scene at "
+        f"{results['resolution_px']}² rendered with both integrators at {results['levels_spp'][0]}…"
+        f"{results['levels_spp'][-1]} spp (prefixes of one run) against an `hg_path` reference; ΔE₀₀ at the "
+        "exposure mapping the reference's luminance p99 to white. Solid: Fig. 7 (sphere source); dashed: "
+        "Fig. 8; dotted grey: each reference's own p95 (half that of its two halves' difference); "
+        f"black dashes: p95 = {results['threshold_delta_e00_p95']:g}. Bench wall time "
+        f"{results['wall_s'] / 60:.1f} min. Times are the levels' render time on the shared 2-core machine "
+        "(warm kernels); the extrapolated times use the median time per spp. The extrapolation takes the "
+        "reference's own p95 out in quadrature. A ratio of the last two levels' p95 near 1/√2 says the "
+        "error is still Monte Carlo noise; a bias (RLT's mean where it disagrees with PLT) would show as a "
+        "ratio towards 1.",
+        "",
+        "![ΔE₀₀ p95 vs spp and vs render time](gallery/convergence.svg)",
+        "",
+        "| scene | integrator | ΔE₀₀ p95 < 1 at | p95 at the last level | mean ΔE₀₀ there | p95 ratio of the "
+        "last two levels (1/√2 = 0.71 for pure noise) | reference: spp, own p95 |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, scene in results["scenes"].items():
+        reference = scene["reference"]
+        for integrator in ("hg_path", "rlt"):
+            run = scene[integrator]
+            reached, last = run["reaches_p95_below_1"], run["levels"][-1]
+            if reached["spp"] is not None:
+                at = f"{reached['spp']} spp, {reached['seconds']:.1f} s"
+            else:
+                at = (
+                    f"not by {last['spp']} spp; N^−½ extrapolation: {reached['extrapolated_spp']} spp, "
+                    f"{reached['extrapolated_seconds']:.0f} s"
+                )
+            ratio = run["p95_ratio_last_two"]
+            lines.append(
+                f"| `{name}` | `{integrator}` | {at} | {last['delta_e00_p95']:.2f} | "
+                f"{last['delta_e00_mean']:.2f} | {ratio:.2f} | {reference['spp']}, "
+                f"{reference['delta_e00_p95']:.2f} |"
+            )
+    return [*lines, ""]
 
 
 def _existing_summaries() -> dict[str, dict[str, Any]]:

@@ -124,7 +124,9 @@ def test_cylinder_source_coherence_is_short_along_its_axis_only(tmp_path: Path) 
             key: float(np.median(values[key][pixels])) for key in ("l2_um", "r_m", "anisotropy")
         }
     cylinder = diagnostics["cylinder"]
-    expected_l2_um = cylinder["r_m"] * math.sqrt(12.0) / (K_550_PER_M * 0.2) * 1e6
+    (tube,) = example("fig7_thin_film_cylinder_light")["emitters"]
+    length_m = float(np.linalg.norm(np.subtract(tube["p1_m"], tube["p0_m"])))
+    expected_l2_um = cylinder["r_m"] * math.sqrt(12.0) / (K_550_PER_M * length_m) * 1e6
     assert cylinder["l2_um"] == pytest.approx(expected_l2_um, rel=0.03)
     assert cylinder["anisotropy"] > 4.0
     assert diagnostics["sphere"]["anisotropy"] < 2.5

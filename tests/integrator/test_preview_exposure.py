@@ -36,3 +36,25 @@ def test_at_most_the_stated_fraction_of_pixels_clips() -> None:
 
 def test_black_image_has_zero_exposure() -> None:
     assert preview_exposure_ev(np.zeros((4, 4, 3))) == 0.0
+
+
+def test_non_finite_pixels_neither_move_the_exposure_nor_warn() -> None:
+    """A NaN and an inf pixel (a renderer sample gone wrong) in the lognormal image: both exposure rules
+    give the EV of the finite pixels alone (before, the NaN made every quantile NaN and the preview fell
+    back to 0 EV), and the preview shows the NaN pixel black (as the viewer does) without a cast warning."""
+    import warnings
+
+    rng = np.random.default_rng(2)
+    rgb = rng.lognormal(0.0, 2.0, size=(40, 50, 3))
+    finite_preview, finite_auto = preview_exposure_ev(rgb), auto_exposure_ev(rgb)
+    broken = np.concatenate([rgb.reshape(-1, 3), [[np.nan, 0.5, 0.5], [np.inf, np.inf, np.inf]]])[None]
+    assert preview_exposure_ev(broken) == pytest.approx(
+        -np.log2(np.quantile(rgb.max(axis=-1), 1 - PREVIEW_CLIPPED_FRACTION))
+    )
+    assert auto_exposure_ev(broken) == pytest.approx(finite_auto)
+    assert finite_preview != 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pixels = np.asarray(Image.open(io.BytesIO(preview_png(broken))))
+    assert pixels[0, -2][0] == 0
+    assert tuple(pixels[0, -1]) == (255, 255, 255)
