@@ -44,7 +44,13 @@ from hgcore.optics import sources
 from hgcore.optics.frames import transverse_frame_components
 from worker.mitsuba_setup import load_mitsuba
 from worker.render import materials as mat
-from worker.render.bsdfs import IncidentCoherence, MaterialKernels, VisibilityModel, film_reflectance
+from worker.render.bsdfs import (
+    IncidentCoherence,
+    MaterialKernels,
+    MaterialParams,
+    VisibilityModel,
+    film_reflectance,
+)
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect
 
@@ -160,7 +166,8 @@ class PendingFilm:
 class CoherenceSample:
     """What the diagnostics record of light reaching the first non-specular vertex (BRIEF): M = (k/r)²Σ⊥
     at λ = 550 nm in that vertex's incident frame, r (m), (cos 2ψ, sin 2ψ) of the ℓ₁ axis on screen;
-    ``secondary``: from a secondary source, whose M comes from the spread of arrival directions (VCZ)."""
+    ``secondary``: from a secondary source, whose M comes from the spread of arrival directions (VCZ).
+    As a sum (``DiagnosticSums.moments``) the same fields hold Σw·M, Σw·r, Σw·(cos 2ψ, sin 2ψ)."""
 
     m_xx: mi.Float = field(default_factory=lambda: mi.Float(0.0))
     m_xy: mi.Float = field(default_factory=lambda: mi.Float(0.0))
@@ -169,6 +176,15 @@ class CoherenceSample:
     cos2: mi.Float = field(default_factory=lambda: mi.Float(0.0))
     sin2: mi.Float = field(default_factory=lambda: mi.Float(0.0))
     secondary: mi.Bool = field(default_factory=lambda: mi.Bool(False))
+
+    def accumulate(self, weight: mi.Float, sample: CoherenceSample) -> None:
+        """Add ``weight`` × ``sample`` to these sums."""
+        self.m_xx += weight * sample.m_xx
+        self.m_xy += weight * sample.m_xy
+        self.m_yy += weight * sample.m_yy
+        self.r += weight * sample.r
+        self.cos2 += weight * sample.cos2
+        self.sin2 += weight * sample.sin2
 
 
 @loop_struct
@@ -185,16 +201,12 @@ class FirstVertex:
 
 @loop_struct
 class DiagnosticSums:
-    """Luminance-weighted per-sample sums of the coherence diagnostics (BRIEF; renderer's ``diag_*`` and
-    ``vcz_*``): Σw, Σw·M, Σw·r, Σw·(cos 2ψ, sin 2ψ); light from secondary sources goes to Σw_vcz, Σw_vcz·r."""
+    """Luminance-weighted per-sample sums of the coherence diagnostics (BRIEF; the renderer's ``diag_*``
+    and ``vcz_*``): Σw and the ``moments`` Σw·M, Σw·r, Σw·(cos 2ψ, sin 2ψ); light from secondary sources
+    goes to Σw_vcz and Σw_vcz·r instead."""
 
     weight: mi.Float = field(default_factory=lambda: mi.Float(0.0))
-    m_xx: mi.Float = field(default_factory=lambda: mi.Float(0.0))
-    m_xy: mi.Float = field(default_factory=lambda: mi.Float(0.0))
-    m_yy: mi.Float = field(default_factory=lambda: mi.Float(0.0))
-    r: mi.Float = field(default_factory=lambda: mi.Float(0.0))
-    cos2: mi.Float = field(default_factory=lambda: mi.Float(0.0))
-    sin2: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    moments: CoherenceSample = field(default_factory=CoherenceSample)
     vcz_weight: mi.Float = field(default_factory=lambda: mi.Float(0.0))
     vcz_r: mi.Float = field(default_factory=lambda: mi.Float(0.0))
 
@@ -205,12 +217,7 @@ class DiagnosticSums:
         self.vcz_weight += vcz
         self.vcz_r += vcz * sample.r
         self.weight += w
-        self.m_xx += w * sample.m_xx
-        self.m_xy += w * sample.m_xy
-        self.m_yy += w * sample.m_yy
-        self.r += w * sample.r
-        self.cos2 += w * sample.cos2
-        self.sin2 += w * sample.sin2
+        self.moments.accumulate(w, sample)
 
 
 @loop_struct
@@ -260,9 +267,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         visibility = VisibilityModel(
             context.disk_coefficients, context.rect_coefficients, bool(context.rect_sources)
         )
-        self.kernels = MaterialKernels(
+        params = MaterialParams(
             context.material_flat, context.spectra_flat, context.material_table, visibility
         )
+        self.kernels = MaterialKernels(params)
 
     # ------------------------------------------------------------------ coherence helpers
     def _frame_for(self, direction: mi.Vector3f) -> tuple[mi.Vector3f, mi.Vector3f]:
@@ -636,12 +644,12 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         return PathResult(
             path.L,
             sums.weight,
-            sums.m_xx,
-            sums.m_xy,
-            sums.m_yy,
-            sums.r,
-            sums.cos2,
-            sums.sin2,
+            sums.moments.m_xx,
+            sums.moments.m_xy,
+            sums.moments.m_yy,
+            sums.moments.r,
+            sums.moments.cos2,
+            sums.moments.sin2,
             sums.vcz_weight,
             sums.vcz_r,
             self._camera_coordinates(first_vertex.direction),

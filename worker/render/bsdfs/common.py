@@ -150,14 +150,27 @@ class MaterialParams:
         return result
 
 
+class ShadingPoint(NamedTuple):
+    """A vertex as a material sees it (the part of Mitsuba's SurfaceInteraction a BSDF reads): the
+    material index, ``wi`` (local frame, towards the previous vertex), the path's wavelengths (nm), the
+    world-space shading frame (gratings' axes, a film's normal; sampling does not need it) and whether the
+    path already carries its hero wavelength only (``MaterialParams.hero_collapse``)."""
+
+    material: mi.UInt32
+    wi: mi.Vector3f
+    wavelengths: mi.Spectrum
+    frame: mi.Frame3f | None = None
+    collapsed: mi.Bool | bool = False
+
+
 class Material:
     """The kernels of one material kind (one module per kind in this package).
 
     A *table* kind (``per_material = False``: diffuse, mirror, smooth dielectric) reads everything from the
     material table and compiles one branch for all its materials; a *model* kind (rough conductor, rough
     dielectric, thin film, grating) compiles one branch per material with the constants of its optics
-    model (``MaterialRecord.model``) built in. ``MaterialKernels`` (``dispatch``) selects the branch of each
-    lane with ``selects``.
+    model (``model``, the record's ``MaterialRecord.model``) built in. ``MaterialKernels`` (``dispatch``)
+    selects the branch of each lane with ``selects``.
     """
 
     kind: ClassVar[mat.MaterialKind]
@@ -166,6 +179,7 @@ class Material:
     def __init__(self, params: MaterialParams, index: int | None = None) -> None:
         self.params = params
         self.index = index  # the material's table index (model kinds only)
+        self.model = None if index is None else params.materials.records[index].model
 
     @property
     def record(self) -> mat.MaterialRecord:
@@ -186,69 +200,17 @@ class Material:
         """Lanes where ``eval_pdf`` applies: reflectors with both directions in front."""
         return active & (wi.z > 0) & (wo.z > 0)
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
-        """Sample the next direction (``collapsed``: the path carries its hero wavelength only)."""
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
+        """Sample the next direction from ``point`` with the uniforms ``sample1``, ``sample2``."""
         raise NotImplementedError
 
     def eval_pdf(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wo: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        coherence: IncidentCoherence,
-        frame: mi.Frame3f,
-        wo_phase: mi.Vector3f,
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Float] | None:
-        """(f·|cos θo|, hero-MIS pdf) of the non-Dirac part; ``None`` for a purely Dirac kind.
-
-        ``frame``: the shading frame in world space (gratings' axes, a film's normal); ``wo_phase``: the
-        direction whose interference phase a thin film uses (module ``thin_film``).
-        """
+        """(f·|cos θo|, hero-MIS pdf) of the non-Dirac part for light arriving along ``wo`` with the
+        coherence ``coherence``; ``None`` for a purely Dirac kind. ``wo_phase``: the direction whose
+        interference phase a thin film uses (module ``thin_film``)."""
         return None
-
-
-def split_specular(u: mi.Float, specular_probability: mi.Float) -> tuple[mi.Bool, mi.Float]:
-    """Choose a material's specular (Dirac) part with probability p: (chosen, the uniform in [0, 1) left
-    for sampling the lobe otherwise, (u − p)/(1 − p))."""
-    chosen = u < specular_probability
-    rest = (u - specular_probability) / dr.maximum(1.0 - specular_probability, 1e-12)
-    return chosen, dr.clip(rest, 0.0, 0.999999)
-
-
-def specular_or_lobe(
-    chosen: mi.Bool,
-    specular_probability: mi.Float,
-    wo: mi.Vector3f,
-    specular_weight: mi.Spectrum,
-    lobe_value: mi.Spectrum,
-    lobe_pdf: mi.Float,
-    lobe_valid: mi.Bool,
-    eta: mi.Float | float = 1.0,
-) -> MaterialSample:
-    """The sample of a "specular part with probability p, else the lobe" material (rough surfaces, films,
-    gratings), given the direction ``wo`` taken, the specular part's weight (over its selection probability)
-    and the lobe's value and hero-MIS pdf at ``wo``: a lobe sample weighs value/(pdf·(1 − p)), an invalid
-    (evanescent) one 0; the specular part has pdf 1 and is a Dirac delta."""
-    lobe_weight = lobe_value / dr.maximum(lobe_pdf * (1.0 - specular_probability), 1e-20)
-    weight = dr.select(chosen, specular_weight, dr.select(lobe_valid & (lobe_pdf > 0), lobe_weight, 0.0))
-    pdf = dr.select(chosen, 1.0, lobe_pdf)
-    return MaterialSample(wo, weight, pdf, chosen, mi.Float(eta))
-
-
-def mean_over_wavelengths(values: list[mi.Float]) -> mi.Float:
-    total = values[0]
-    for value in values[1:]:
-        total = total + value
-    return total / len(values)
 
 
 def refract(wi: mi.Vector3f, eta_ti: mi.Float, cos_t: mi.Float) -> mi.Vector3f:
@@ -256,6 +218,6 @@ def refract(wi: mi.Vector3f, eta_ti: mi.Float, cos_t: mi.Float) -> mi.Vector3f:
     return mi.Vector3f(-wi.x / eta_ti, -wi.y / eta_ti, -dr.mulsign(cos_t, wi.z))
 
 
-def components(v: mi.Vector3f) -> tuple[mi.Float, mi.Float, mi.Float]:
+def vec(v: mi.Vector3f) -> tuple[mi.Float, mi.Float, mi.Float]:
     """A vector as the component tuple the ``hgcore.optics`` formulas take."""
     return (v.x, v.y, v.z)

@@ -12,7 +12,7 @@ import mitsuba as mi
 
 from hgcore.optics.fresnel import fresnel_dielectric
 from worker.render import materials as mat
-from worker.render.bsdfs.common import OPS, Material, MaterialSample, refract
+from worker.render.bsdfs.common import OPS, Material, MaterialSample, ShadingPoint, refract
 
 
 class Dielectric(Material):
@@ -21,22 +21,14 @@ class Dielectric(Material):
     def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
         return active  # both sides: the interface transmits
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
-        params = self.params
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
+        params, material, wi, wavelengths = self.params, point.material, point.wi, point.wavelengths
         eta = params.spectrum(material, mat.ETA_ID, wavelengths)[0] / params.param(material, mat.EXTERIOR_IOR)
         # η_ti = n_transmitted / n_incident seen from the camera side (inside: the inverse).
         eta_ti = dr.select(wi.z >= 0, eta, dr.rcp(eta))
         reflectance, cos_t = fresnel_dielectric(wi.z, eta_ti, OPS)
         reflect = sample1 <= reflectance
         wo = dr.select(reflect, mi.reflect(wi), refract(wi, eta_ti, cos_t))
-        weight = params.hero_collapse(mi.Spectrum(1.0), material, ~reflect & ~collapsed)
+        weight = params.hero_collapse(mi.Spectrum(1.0), material, ~reflect & ~point.collapsed)
         weight = dr.select(reflect, weight, weight * dr.square(dr.rcp(eta_ti)))
         return MaterialSample(wo, weight, mi.Float(1.0), mi.Bool(True), dr.select(reflect, 1.0, eta_ti))

@@ -7,39 +7,21 @@ import math
 import mitsuba as mi
 
 from worker.render import materials as mat
-from worker.render.bsdfs.common import IncidentCoherence, Material, MaterialSample
+from worker.render.bsdfs.common import IncidentCoherence, Material, MaterialSample, ShadingPoint
 
 
 class Diffuse(Material):
     kind = mat.MaterialKind.DIFFUSE
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
+    def _reflectance(self, point: ShadingPoint) -> mi.Spectrum:
+        return self.params.spectrum(point.material, mat.REFLECTANCE_ID, point.wavelengths)
+
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         direction = mi.warp.square_to_cosine_hemisphere(sample2)
-        return MaterialSample(
-            direction,
-            self.params.spectrum(material, mat.REFLECTANCE_ID, wavelengths),
-            mi.warp.square_to_cosine_hemisphere_pdf(direction),
-            mi.Bool(False),
-            mi.Float(1.0),
-        )
+        pdf = mi.warp.square_to_cosine_hemisphere_pdf(direction)
+        return MaterialSample(direction, self._reflectance(point), pdf, mi.Bool(False), mi.Float(1.0))
 
     def eval_pdf(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wo: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        coherence: IncidentCoherence,
-        frame: mi.Frame3f,
-        wo_phase: mi.Vector3f,
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Float]:
-        reflectance = self.params.spectrum(material, mat.REFLECTANCE_ID, wavelengths)
-        return reflectance * (wo.z / math.pi), wo.z / math.pi
+        return self._reflectance(point) * (wo.z / math.pi), wo.z / math.pi

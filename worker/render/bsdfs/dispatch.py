@@ -18,7 +18,7 @@ from worker.render.bsdfs.common import (
     Material,
     MaterialParams,
     MaterialSample,
-    VisibilityModel,
+    ShadingPoint,
 )
 from worker.render.bsdfs.dielectric import Dielectric
 from worker.render.bsdfs.diffuse import Diffuse
@@ -37,18 +37,13 @@ MATERIAL_CLASSES: dict[mat.MaterialKind, type[Material]] = {
 class MaterialKernels:
     """Gathers material parameters and dispatches to the kernels of the kinds present in the scene."""
 
-    def __init__(
-        self,
-        table: mi.Float,
-        spectra: mi.Float,
-        materials: mat.MaterialTable,
-        visibility: VisibilityModel,
-    ) -> None:
-        self.params = MaterialParams(table, spectra, materials, visibility)
+    def __init__(self, params: MaterialParams) -> None:
+        self.params = params
+        materials = params.materials
         self.materials = materials
         self.kinds = materials.kinds
-        self.max_beams = self.params.max_beams
-        self.visibility = visibility
+        self.max_beams = params.max_beams
+        self.visibility = params.visibility
         self.branches: list[Material] = []
         for kind in sorted(self.kinds & MATERIAL_CLASSES.keys()):
             cls = MATERIAL_CLASSES[kind]
@@ -120,11 +115,12 @@ class MaterialKernels:
         sampled emitter points serve radiometry only).
         """
         kind = self.kind(material)
+        point = ShadingPoint(material, wi, wavelengths, frame)
         phase = wo if wo_phase is None else wo_phase
         value = mi.Spectrum(0.0)
         pdf = mi.Float(0.0)
         for branch in self.branches:
-            evaluated = branch.eval_pdf(material, wi, wo, wavelengths, coherence, frame, phase)
+            evaluated = branch.eval_pdf(point, wo, coherence, phase)
             if evaluated is None:  # a Dirac kind: nothing to evaluate
                 continue
             is_this = branch.eval_domain(wi, wo, active) & branch.selects(material, kind)
@@ -147,14 +143,14 @@ class MaterialKernels:
         coherence is known. ``collapsed``: the path already refracted through a dispersive medium and
         carries its hero wavelength only."""
         kind = self.kind(material)
-        collapsed = mi.Bool(collapsed)
+        point = ShadingPoint(material, wi, wavelengths, None, mi.Bool(collapsed))
         wo, weight, pdf = mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Float(0.0)
         delta, eta = mi.Bool(False), mi.Float(1.0)
         terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
         transmitted = mi.Bool(False)
         for branch in self.branches:
             is_this = branch.sample_domain(wi, active) & branch.selects(material, kind)
-            sampled = branch.sample(material, wi, wavelengths, sample1, sample2, collapsed)
+            sampled = branch.sample(point, sample1, sample2)
             wo = dr.select(is_this, sampled.wo, wo)
             weight = dr.select(is_this, sampled.weight, weight)
             pdf = dr.select(is_this, sampled.pdf, pdf)

@@ -13,25 +13,14 @@ import mitsuba as mi
 
 from hgcore.optics import grating as grating_model
 from worker.render import materials as mat
-from worker.render.bsdfs.common import (
-    OPS,
-    IncidentCoherence,
-    Material,
-    MaterialParams,
-    MaterialSample,
-    components,
-    specular_or_lobe,
-    split_specular,
-)
+from worker.render.bsdfs.common import OPS, IncidentCoherence, Material, MaterialSample, ShadingPoint, vec
+from worker.render.bsdfs.lobes import specular_or_lobe, split_specular
 
 
 class Grating(Material):
     kind = mat.MaterialKind.GRATING
     per_material = True
-
-    def __init__(self, params: MaterialParams, index: int | None = None) -> None:
-        super().__init__(params, index)
-        self.grating: grating_model.BinaryGrating = self.record.model
+    model: grating_model.BinaryGrating
 
     def _rotation(self, material: mi.UInt32) -> tuple[mi.Float, mi.Float]:
         angle = self.params.param(material, mat.ORIENTATION_RAD)
@@ -62,47 +51,33 @@ class Grating(Material):
         )
 
     def eval_pdf(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wo: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        coherence: IncidentCoherence,
-        frame: mi.Frame3f,
-        wo_phase: mi.Vector3f,
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Float]:
-        light = components(self._to_grating(material, wo))
-        view = components(self._to_grating(material, wi))
-        angular_cov = self._angular_covariance(material, coherence, frame)
+        material, wi, wavelengths = point.material, point.wi, point.wavelengths
+        light = vec(self._to_grating(material, wo))
+        view = vec(self._to_grating(material, wi))
+        angular_cov = self._angular_covariance(material, coherence, point.frame)
         fresnel = self.params.interface_reflectance(material, wo.z, wavelengths)
         value = mi.Spectrum(0.0)
         pdf_sum = mi.Float(0.0)
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
             brdf = grating_model.grating_eval(
-                self.grating, light, view, wavelength_m, fresnel[j], angular_cov, OPS
+                self.model, light, view, wavelength_m, fresnel[j], angular_cov, OPS
             )
             value[j] = brdf * wo.z
-            pdf_sum += grating_model.grating_pdf(self.grating, view, light, wavelength_m, angular_cov, OPS)
+            pdf_sum += grating_model.grating_pdf(self.model, view, light, wavelength_m, angular_cov, OPS)
         return value, pdf_sum / len(wavelengths)
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         """The 0th order with probability η_00(λ_hero), else a diffraction lobe.
 
         Lobes are drawn with the intrinsic lobe width only: the coherence of indirect light is not known
         when the direction is chosen, and direct light reaches gratings through next-event estimation only
         (docs/integrator.md).
         """
-        grating = self.grating
-        view = components(self._to_grating(material, wi))
+        grating, material, wi, wavelengths = self.model, point.material, point.wi, point.wavelengths
+        view = vec(self._to_grating(material, wi))
         hero_m = wavelengths[0] * 1e-9
         zero_cov = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
         specular_probability = grating_model.specular_efficiency(grating, hero_m, OPS)
@@ -116,7 +91,7 @@ class Grating(Material):
         lobe_value = mi.Spectrum(0.0)
         pdf_sum = mi.Float(0.0)
         specular_weight = mi.Spectrum(0.0)
-        light = components(self._to_grating(material, lobe_wo))
+        light = vec(self._to_grating(material, lobe_wo))
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
             brdf = grating_model.grating_eval(grating, light, view, wavelength_m, fresnel[j], zero_cov, OPS)

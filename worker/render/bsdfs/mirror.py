@@ -5,25 +5,13 @@ from __future__ import annotations
 import mitsuba as mi
 
 from worker.render import materials as mat
-from worker.render.bsdfs.common import Material, MaterialSample
+from worker.render.bsdfs.common import Material, MaterialSample, ShadingPoint
 
 
 class Mirror(Material):
     kind = mat.MaterialKind.MIRROR
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
-        return MaterialSample(
-            mi.reflect(wi),
-            self.params.interface_reflectance(material, wi.z, wavelengths),
-            mi.Float(1.0),
-            mi.Bool(True),
-            mi.Float(1.0),
-        )
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
+        wi = point.wi
+        reflectance = self.params.interface_reflectance(point.material, wi.z, point.wavelengths)
+        return MaterialSample(mi.reflect(wi), reflectance, mi.Float(1.0), mi.Bool(True), mi.Float(1.0))

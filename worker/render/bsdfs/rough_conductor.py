@@ -13,72 +13,42 @@ import mitsuba as mi
 
 from hgcore.optics import rough_surface
 from worker.render import materials as mat
-from worker.render.bsdfs.common import (
-    OPS,
-    IncidentCoherence,
-    Material,
-    MaterialParams,
-    MaterialSample,
-    components,
-    mean_over_wavelengths,
-    specular_or_lobe,
-    split_specular,
-)
+from worker.render.bsdfs.common import OPS, IncidentCoherence, Material, MaterialSample, ShadingPoint, vec
+from worker.render.bsdfs.lobes import mean_over_wavelengths, specular_or_lobe, split_specular
 
 
 class RoughConductor(Material):
     kind = mat.MaterialKind.ROUGH_CONDUCTOR
     per_material = True
+    model: rough_surface.RoughSurface
+    _fraction_table: mi.Float | None = None  # built on first use (``_reflection_fraction``)
 
-    def __init__(self, params: MaterialParams, index: int | None = None) -> None:
-        super().__init__(params, index)
-        self.surface: rough_surface.RoughSurface = self.record.model
-        self._fraction_table: mi.Float | None = None
-
-    def reflectance(
-        self, material: mi.UInt32, wi: mi.Vector3f, wo: mi.Vector3f, wavelengths: mi.Spectrum
-    ) -> list[mi.Spectrum]:
+    def reflectance(self, point: ShadingPoint, wo: mi.Vector3f) -> list[mi.Spectrum]:
         """The interface's reflectance terms for light arriving along ``wo``: [F(θ_i)] for a conductor (the
         first term is the incoherent reflectance that scales both parts)."""
-        return [self.params.interface_reflectance(material, wi.z, wavelengths)]
+        return [self.params.interface_reflectance(point.material, point.wi.z, point.wavelengths)]
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
-        sampled, _ = self.sample_reflection(material, wi, wavelengths, sample1, sample2)
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
+        sampled, _ = self.sample_reflection(point, sample1, sample2)
         return sampled
 
     def eval_pdf(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wo: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        coherence: IncidentCoherence,
-        frame: mi.Frame3f,
-        wo_phase: mi.Vector3f,
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Float]:
-        fresnel = self.params.interface_reflectance(material, wi.z, wavelengths)
-        return self.lobe_eval(wi, wo, wavelengths, fresnel)
+        return self.lobe_eval(point, wo, self.reflectance(point, wo)[0])
 
     def lobe_eval(
-        self, wi: mi.Vector3f, wo: mi.Vector3f, wavelengths: mi.Spectrum, reflectance: mi.Spectrum
+        self, point: ShadingPoint, wo: mi.Vector3f, reflectance: mi.Spectrum
     ) -> tuple[mi.Spectrum, mi.Float]:
         """Scattered lobe value f·cos θo and hero-MIS pdf for light arriving along ``wo``.
 
         Harvey–Shack's incident-side factors (1 − e^{−g}, the propagating fraction) are those of the side
         the path arrives from, ``wi``. ``reflectance`` is the caller's F (conductors: at ``wi``).
         """
-        surface = self.surface
+        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
         value = mi.Spectrum(0.0)
         pdf_sum = mi.Float(0.0)
-        light, view = components(wo), components(wi)
+        light, view = vec(wo), vec(wi)
         sin_view = dr.sqrt(dr.maximum(wi.x * wi.x + wi.y * wi.y, 0.0))
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
@@ -94,7 +64,7 @@ class RoughConductor(Material):
         """Propagating fraction P of reflection in air, bilinear in ``reflection_fraction_table`` (built once
         per surface): 4 gathers instead of a 32-node angular integral per wavelength and sample."""
         if self._fraction_table is None:
-            self._fraction_table = mi.Float(rough_surface.reflection_fraction_table(self.surface).ravel())
+            self._fraction_table = mi.Float(rough_surface.reflection_fraction_table(self.model).ravel())
         table = self._fraction_table
         columns = len(rough_surface.TABLE_WAVELENGTHS_M)
         first = float(rough_surface.TABLE_WAVELENGTHS_M[0]) * 1e9
@@ -115,12 +85,7 @@ class RoughConductor(Material):
         return top * (1.0 - a) + bottom * a
 
     def sample_reflection(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
+        self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f
     ) -> tuple[MaterialSample, list[mi.Spectrum]]:
         """Specular (delta) part with probability ⟨e^{−g}⟩ (the mean over the path's wavelengths), else an
         exact PSD-lobe sample at λ_hero.
@@ -130,7 +95,7 @@ class RoughConductor(Material):
         The mean is a one-sample MIS over the wavelengths: every weight is at most 4·F_j/F. Returns the
         sample and the reflectance terms (``reflectance``) at the sampled direction.
         """
-        surface = self.surface
+        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
         hero_m = wavelengths[0] * 1e-9
         specular_probability = mean_over_wavelengths(
             [
@@ -140,13 +105,13 @@ class RoughConductor(Material):
         )
         choose_specular, lobe_sample1 = split_specular(sample1, specular_probability)
         lobe_dir, _, lobe_valid = rough_surface.rough_reflection_sample(
-            surface, components(wi), hero_m, lobe_sample1, sample2[0], OPS
+            surface, vec(wi), hero_m, lobe_sample1, sample2[0], OPS
         )
         lobe_wo = mi.Vector3f(*lobe_dir)
         wo = dr.select(choose_specular, mi.reflect(wi), lobe_wo)
-        terms = self.reflectance(material, wi, wo, wavelengths)
+        terms = self.reflectance(point, wo)
         reflectance = terms[0]
-        lobe_value, lobe_pdf = self.lobe_eval(wi, lobe_wo, wavelengths, reflectance)
+        lobe_value, lobe_pdf = self.lobe_eval(point, lobe_wo, reflectance)
         specular_weight = mi.Spectrum(0.0)
         for j in range(len(wavelengths)):
             g_j = rough_surface.roughness_exponent(surface.rms_height_m, wi.z, wavelengths[j] * 1e-9)

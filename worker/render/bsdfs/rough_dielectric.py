@@ -15,26 +15,14 @@ import mitsuba as mi
 from hgcore.optics import rough_surface
 from hgcore.optics.fresnel import fresnel_dielectric
 from worker.render import materials as mat
-from worker.render.bsdfs.common import (
-    OPS,
-    IncidentCoherence,
-    Material,
-    MaterialParams,
-    MaterialSample,
-    components,
-    mean_over_wavelengths,
-    specular_or_lobe,
-    split_specular,
-)
+from worker.render.bsdfs.common import OPS, IncidentCoherence, Material, MaterialSample, ShadingPoint, vec
+from worker.render.bsdfs.lobes import mean_over_wavelengths, specular_or_lobe, split_specular
 
 
 class RoughDielectric(Material):
     kind = mat.MaterialKind.ROUGH_DIELECTRIC
     per_material = True
-
-    def __init__(self, params: MaterialParams, index: int | None = None) -> None:
-        super().__init__(params, index)
-        self.surface: rough_surface.RoughSurface = self.record.model
+    model: rough_surface.RoughSurface
 
     def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
         return active & (wi.z != 0)
@@ -42,34 +30,25 @@ class RoughDielectric(Material):
     def eval_domain(self, wi: mi.Vector3f, wo: mi.Vector3f, active: mi.Bool) -> mi.Bool:
         return active & (wi.z != 0) & (wo.z != 0)
 
-    def _camera_side(
-        self, material: mi.UInt32, wi: mi.Vector3f, wavelengths: mi.Spectrum
-    ) -> tuple[mi.Bool, mi.Spectrum, mi.Spectrum]:
+    def _camera_side(self, point: ShadingPoint) -> tuple[mi.Bool, mi.Spectrum, mi.Spectrum]:
         """(outside, n_camera, n_other) per wavelength: relative indices of the camera's and the far side."""
-        params = self.params
-        eta = params.spectrum(material, mat.ETA_ID, wavelengths) / params.param(material, mat.EXTERIOR_IOR)
-        outside = wi.z > 0
+        params, material = self.params, point.material
+        eta = params.spectrum(material, mat.ETA_ID, point.wavelengths) / params.param(
+            material, mat.EXTERIOR_IOR
+        )
+        outside = point.wi.z > 0
         return outside, dr.select(outside, 1.0, eta), dr.select(outside, eta, 1.0)
 
     def eval_pdf(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wo: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        coherence: IncidentCoherence,
-        frame: mi.Frame3f,
-        wo_phase: mi.Vector3f,
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Float]:
-        return self.lobes(material, wi, wo, wavelengths)
+        return self.lobes(point, wo)
 
-    def lobes(
-        self, material: mi.UInt32, wi: mi.Vector3f, wo: mi.Vector3f, wavelengths: mi.Spectrum
-    ) -> tuple[mi.Spectrum, mi.Float]:
+    def lobes(self, point: ShadingPoint, wo: mi.Vector3f) -> tuple[mi.Spectrum, mi.Float]:
         """f·|cos θo| and hero-MIS pdf of the scattered lobes (light arriving along wo). The pdf is that of
         ``sample`` (selection probability × lobe density), so a lobe sample's weight is a constant."""
-        surface = self.surface
-        outside, n_camera, n_other = self._camera_side(material, wi, wavelengths)
+        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
+        outside, n_camera, n_other = self._camera_side(point)
         side = dr.select(outside, 1.0, -1.0)
         view = mi.Vector3f(wi.x, wi.y, wi.z * side)
         light = mi.Vector3f(wo.x, wo.y, wo.z * side)
@@ -84,20 +63,20 @@ class RoughDielectric(Material):
             t_view = dr.select(cos_t_view > 0.0, 1.0 - r_view, 0.0)
             reflection = rough_surface.rough_reflection_eval(
                 surface,
-                components(view),
-                components(light),
+                vec(view),
+                vec(light),
                 wavelength_m,
                 r_view,
                 OPS,
                 exterior_ior=n_camera[j],
             )
             reflection_pdf = rough_surface.rough_reflection_pdf(
-                surface, components(view), components(light), wavelength_m, OPS, exterior_ior=n_camera[j]
+                surface, vec(view), vec(light), wavelength_m, OPS, exterior_ior=n_camera[j]
             )
             transmission = rough_surface.rough_transmission_eval(
                 surface,
-                components(view),
-                components(light),
+                vec(view),
+                vec(light),
                 wavelength_m,
                 t_view,
                 cos_t_view,
@@ -107,8 +86,8 @@ class RoughDielectric(Material):
             ) * dr.square(n_camera[j] / n_other[j])
             transmission_pdf = rough_surface.rough_transmission_pdf(
                 surface,
-                components(view),
-                components(light),
+                vec(view),
+                vec(light),
                 wavelength_m,
                 OPS,
                 exterior_ior=n_camera[j],
@@ -118,21 +97,13 @@ class RoughDielectric(Material):
             pdf_sum += dr.select(reflected, r_view * reflection_pdf, t_view * transmission_pdf)
         return value, pdf_sum / len(wavelengths)
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         """Reflect with probability R(λ_hero) else transmit; within each, the specular (delta) part with
         probability ⟨e^{−g}⟩ (the mean over the wavelengths, as for ``rough_conductor``), else an exact
         PSD-lobe sample. Dispersive media keep the hero wavelength only after a specular refraction (as
         the smooth dielectric does); radiance scales by (n_camera/n_light)² across the interface."""
-        surface = self.surface
-        outside, n_camera, n_other = self._camera_side(material, wi, wavelengths)
+        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
+        outside, n_camera, n_other = self._camera_side(point)
         side = dr.select(outside, 1.0, -1.0)
         view = mi.Vector3f(wi.x, wi.y, wi.z * side)
         hero_m = wavelengths[0] * 1e-9
@@ -159,11 +130,11 @@ class RoughDielectric(Material):
         specular_probability = mean_over_wavelengths(specular_fractions)
         specular, u_lobe = split_specular(u, specular_probability)
         lobe_r, _, valid_r = rough_surface.rough_reflection_sample(
-            surface, components(view), hero_m, u_lobe, sample2[0], OPS, exterior_ior=n_camera[0]
+            surface, vec(view), hero_m, u_lobe, sample2[0], OPS, exterior_ior=n_camera[0]
         )
         lobe_t, _, valid_t = rough_surface.rough_transmission_sample(
             surface,
-            components(view),
+            vec(view),
             hero_m,
             u_lobe,
             sample2[0],
@@ -178,7 +149,7 @@ class RoughDielectric(Material):
         local = dr.select(specular, specular_dir, lobe)
         wo = mi.Vector3f(local.x, local.y, local.z * side)
         # Lobe sample: the estimator's weight is value / pdf of the same formulation as eval_pdf.
-        lobe_value, lobe_pdf = self.lobes(material, wi, wo, wavelengths)
+        lobe_value, lobe_pdf = self.lobes(point, wo)
         # Specular sample: R e^{−g} (or T e^{−g_t} with the radiance factor) over its selection probability.
         specular_weight = mi.Spectrum(0.0)
         for j in range(len(wavelengths)):
@@ -198,7 +169,7 @@ class RoughDielectric(Material):
             )
             specular_weight[j] = dr.select(reflect, reflected_part, transmitted_part)
         specular_weight = self.params.hero_collapse(
-            specular_weight, material, specular & ~reflect & ~collapsed
+            specular_weight, point.material, specular & ~reflect & ~point.collapsed
         )
         # Russian roulette divides out the radiance factor of a transmission (η of the hero wavelength).
         eta = dr.select(reflect, 1.0, eta_hero)

@@ -31,6 +31,7 @@ from worker.render.bsdfs.common import (
     IncidentCoherence,
     MaterialParams,
     MaterialSample,
+    ShadingPoint,
     VisibilityModel,
     refract,
 )
@@ -83,59 +84,37 @@ class ThinFilm(RoughConductor):
     kind = mat.MaterialKind.THIN_FILM
     per_material = True
 
-    def __init__(self, params: MaterialParams, index: int | None = None) -> None:
-        super().__init__(params, index)
-        #: on a dielectric substrate: reflects and transmits (one-sided like glass)
-        self.transmits = self.record.values.get(mat.FILM_TRANSMITS, 0.0) > 0.5
+    @property
+    def transmits(self) -> bool:
+        """On a dielectric substrate: reflects and transmits (one-sided like glass)."""
+        return self.record.values.get(mat.FILM_TRANSMITS, 0.0) > 0.5
 
-    def reflectance(
-        self, material: mi.UInt32, wi: mi.Vector3f, wo: mi.Vector3f, wavelengths: mi.Spectrum
-    ) -> list[mi.Spectrum]:
+    def reflectance(self, point: ShadingPoint, wo: mi.Vector3f) -> list[mi.Spectrum]:
         """The film's terms at the sampled direction (R_incoherent first)."""
-        return film_terms(self.params, material, wo.z, wavelengths)
+        return film_terms(self.params, point.material, wo.z, point.wavelengths)
 
     def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
         return active & (wi.z != 0) if self.transmits else active & (wi.z > 0)
 
-    def sample(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
-    ) -> MaterialSample:
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         if self.transmits:
-            return self._sample_on_dielectric(material, wi, wavelengths, sample1, sample2, collapsed)
-        sampled, terms = self.sample_reflection(material, wi, wavelengths, sample1, sample2)
+            return self._sample_on_dielectric(point, sample1, sample2)
+        sampled, terms = self.sample_reflection(point, sample1, sample2)
         return sampled._replace(film=FilmSample(terms, mi.Bool(False)))
 
     def eval_pdf(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wo: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        coherence: IncidentCoherence,
-        frame: mi.Frame3f,
-        wo_phase: mi.Vector3f,
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Float]:
-        terms = film_terms(self.params, material, wo_phase.z, wavelengths)
-        thickness_m = self.params.param(material, mat.FILM_THICKNESS_M)
+        terms = film_terms(self.params, point.material, wo_phase.z, point.wavelengths)
+        thickness_m = self.params.param(point.material, mat.FILM_THICKNESS_M)
+        separation = point.frame.n * thickness_m
         reflectance = film_reflectance(
-            terms, self.params.visibility, coherence, frame.n * thickness_m, wavelengths
+            terms, self.params.visibility, coherence, separation, point.wavelengths
         )
-        return self.lobe_eval(wi, wo, wavelengths, reflectance)
+        return self.lobe_eval(point, wo, reflectance)
 
     def _sample_on_dielectric(
-        self,
-        material: mi.UInt32,
-        wi: mi.Vector3f,
-        wavelengths: mi.Spectrum,
-        sample1: mi.Float,
-        sample2: mi.Point2f,
-        collapsed: mi.Bool,
+        self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f
     ) -> MaterialSample:
         """A film on a dielectric substrate reflects with R(V) and transmits T(V) = 1 − R(V)
         (``thin_film.transmission_terms``).
@@ -147,7 +126,7 @@ class ThinFilm(RoughConductor):
         stack has the same R from both sides (exact in the coherent and incoherent limits), so the
         exterior-side terms serve both. The film's roughness scatters reflected light only.
         """
-        params = self.params
+        params, material, wi, wavelengths = self.params, point.material, point.wi, point.wavelengths
         exterior = params.param(material, mat.EXTERIOR_IOR)
         eta = params.spectrum(material, mat.ETA_ID, wavelengths)[0] / exterior
         outside = wi.z > 0
@@ -162,14 +141,14 @@ class ThinFilm(RoughConductor):
         reflect = sample1 < reflect_probability
         # exterior reflection: the rough film's own sampling with the remaining uniform
         u_reflect = dr.clip(sample1 / dr.maximum(reflect_probability, 1e-12), 0.0, 0.999999)
-        lobe, lobe_terms = self.sample_reflection(material, wi, wavelengths, u_reflect, sample2)
+        lobe, lobe_terms = self.sample_reflection(point, u_reflect, sample2)
         r_weight = lobe.weight / dr.maximum(reflect_probability, 1e-12)
         # substrate-side reflection: specular, R/R_hero
         inner_weight = reflectance / dr.maximum(reflect_probability, 1e-12)
         # transmission: specular refraction with T/T_hero and the radiance factor (n_camera/n_light)²
         transmittance = 1.0 - reflectance
         t_weight = transmittance / dr.maximum(1.0 - reflect_probability, 1e-12) * dr.square(dr.rcp(eta_ti))
-        t_weight = params.hero_collapse(t_weight, material, ~collapsed)
+        t_weight = params.hero_collapse(t_weight, material, ~point.collapsed)
         wo = dr.select(reflect, dr.select(outside, lobe.wo, mi.reflect(wi)), refract(wi, eta_ti, cos_t))
         weight = dr.select(reflect, dr.select(outside, r_weight, inner_weight), t_weight)
         pdf = dr.select(reflect & outside, lobe.pdf, 1.0)
