@@ -2,9 +2,11 @@
 
 Estimator. Unidirectional path tracing from the camera with next-event estimation and MIS (balance
 heuristic, hero-wavelength pdfs, see ``worker.render.bsdfs``), Russian roulette from ``rr_depth``, and
-Mitsuba's ``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination). Emitter surfaces
-absorb. ``trace`` reads like Mitsuba's prb.py: its loop state is declared together (the ``loop_struct``
-classes below) and banner comments mark the phases of a bounce.
+Mitsuba's ``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination); as in prb.py the
+roulette's survival probability is min(max β·η², 0.95), η the product of the refractions' relative indices,
+so the radiance factors 1/η² of refraction are not mistaken for absorption. Emitter surfaces absorb.
+``trace`` reads like Mitsuba's prb.py: its loop state is declared together (the ``loop_struct`` classes
+below) and banner comments mark the phases of a bounce.
 
 Coherence state (paper §5.2: "each traced ray carries the shape matrix, transverse HG coefficients, the
 propagation direction and distance r"). Because paths start at the camera, the coherence of the light a
@@ -584,6 +586,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             # ---------------------- Start or carry the pending record ----------------------------
             path.beta = dr.select(continue_path, path.beta * bs.weight, 0.0)
+            path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             # A new record at a non-specular vertex; carried through specular ones. Without thin films only
             # the first non-specular vertex needs its incident coherence.
             new_record = continue_path & nonspecular & ~film_passthrough & (~first_vertex.seen | has_film)
