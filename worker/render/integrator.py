@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import typing
 from dataclasses import dataclass, field, fields
+from typing import NamedTuple
 
 import drjit as dr
 
@@ -50,6 +51,7 @@ from worker.render.bsdfs import (
     IncidentCoherence,
     MaterialKernels,
     MaterialParams,
+    MaterialSample,
     VisibilityModel,
     film_reflectance,
 )
@@ -231,6 +233,18 @@ class FirstHit:
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
 
 
+class Vertex(NamedTuple):
+    """The bounce's surface as the coherence bookkeeping reads it (one per loop iteration)."""
+
+    si: mi.SurfaceInteraction3f
+    material: mi.UInt32
+    kind: mi.UInt32
+    frame: mi.Frame3f  # shading frame, flipped towards the incident side where two-sided
+    hit_emitter: mi.Bool
+    specular: mi.Bool
+    nonspecular: mi.Bool
+
+
 def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
     """Balance heuristic p_a/(p_a + p_b) of the strategy with density ``pdf_a`` (hero-MIS densities)."""
     return pdf_a / dr.maximum(pdf_a + pdf_b, 1e-20)
@@ -360,6 +374,159 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             mi.Bool(secondary),
         )
 
+    def _resolve(
+        self,
+        resolve: mi.Bool,
+        vertex: Vertex,
+        em_record: mi.UInt32,
+        segment: mi.Float,
+        ray_origin: mi.Point3f,
+        wavelengths: mi.Spectrum,
+        path: PathState,
+        record: PendingRecord,
+        film: PendingFilm,
+        first_vertex: FirstVertex,
+    ) -> None:
+        """Resolve the pending record in the lanes ``resolve``: its source is what the path reached — the
+        emitter hit (its whole silhouette, from its centre) or a non-specular surface (a secondary source:
+        one point, or its scattering region) — seen in the record's frame after r = ``chain_distance``. A
+        pending film's throughput is rescaled by R(V)/R_incoherent; the pixel's first record becomes the
+        diagnostics' ``first_vertex.indirect``."""
+        em_sigma = emitter_coherence(
+            mi,
+            self.context.emitter_flat,
+            self.context.emitter_kinds,
+            em_record,
+            record.frame_x,
+            record.frame_y,
+        )
+        region_sigma, overridden = self._scattering_region(
+            vertex.material, vertex.si.n, record.frame_x, record.frame_y
+        )
+        source_sigma = dr.select(vertex.hit_emitter, tuple(em_sigma), tuple(region_sigma))
+        if self.plane_waves:
+            source_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
+        # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
+        # becomes the distance from the segment's origin to that centre.
+        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray_origin)
+        record.chain_distance = dr.select(
+            vertex.hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
+        )
+        resolved = IncidentCoherence(
+            *source_sigma,
+            record.chain_distance,
+            record.frame_x,
+            record.frame_y,
+            vertex.hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
+        )
+        if self.kernels.has(mat.INTERFERENCE_KINDS):
+            # An emitter reached straight from the film: its interference phase is taken towards the
+            # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
+            centre_phase = (
+                vertex.hit_emitter & ~record.chain_specular & ~film.transmitted & (not self.plane_waves)
+            )
+            _, emitter_to_film = emitter_direction(mi, self.context.emitter_flat, em_record, film.position)
+            cos_centre = -dr.dot(emitter_to_film, film.normal)
+            centre_terms = self.kernels.film_terms(film.material, cos_centre, wavelengths)
+            phase_terms = dr.select(centre_phase, list(centre_terms), list(film.terms))
+            film_factor = film_reflectance(
+                phase_terms, self.kernels.visibility, resolved, film.separation, wavelengths
+            )
+            # The path was sampled with the incoherent part at its own direction: apply the relative
+            # interference modulation R(V)/R_incoherent of the phase direction.
+            film_factor = film_factor / dr.maximum(phase_terms[0], 1e-12)
+            path.beta = dr.select(resolve & film.pending, path.beta * film_factor, path.beta)
+        record_first = resolve & record.first
+        first_vertex.indirect = dr.select(
+            record_first,
+            self._coherence_sample(
+                source_sigma,
+                record.chain_distance,
+                self._screen_angle_terms(*source_sigma, first_vertex.frame_x, first_vertex.frame_y),
+                ~vertex.hit_emitter & ~overridden,
+            ),
+            first_vertex.indirect,
+        )
+        first_vertex.indirect_ready |= record_first
+
+    @dr.syntax
+    def _start_or_carry(
+        self,
+        vertex: Vertex,
+        sampled: MaterialSample,
+        wo_world: mi.Vector3f,
+        continue_path: mi.Bool,
+        film_passthrough: mi.Bool,
+        record: PendingRecord,
+        film: PendingFilm,
+        first_vertex: FirstVertex,
+    ) -> None:
+        """Start a pending record at a non-specular vertex (its incident frame ⟂ the sampled direction; a
+        thin film's separation and terms), or carry the pending one through a perfect mirror or refraction
+        (r keeps growing, the frame and the film's separation are reflected with the beam)."""
+        has_film = self.kernels.has(mat.INTERFERENCE_KINDS)
+        # A new record at a non-specular vertex; carried through specular ones. Without thin films only
+        # the first non-specular vertex needs its incident coherence.
+        new_record = continue_path & vertex.nonspecular & ~film_passthrough & (~first_vertex.seen | has_film)
+        incoming_fx = mi.Vector3f(record.frame_x)
+        incoming_fy = mi.Vector3f(record.frame_y)
+        if new_record:
+            incoming_fx, incoming_fy = self._frame_for(-wo_world)
+        record.frame_x = dr.select(new_record, incoming_fx, record.frame_x)
+        record.frame_y = dr.select(new_record, incoming_fy, record.frame_y)
+        new_first = new_record & ~first_vertex.seen
+        first_vertex.frame_x = dr.select(new_first, incoming_fx, first_vertex.frame_x)
+        first_vertex.frame_y = dr.select(new_first, incoming_fy, first_vertex.frame_y)
+        first_vertex.direction = dr.select(new_first, wo_world, first_vertex.direction)
+        record.first = dr.select(new_record, ~first_vertex.seen, record.first)
+        record.pending |= new_record
+        record.chain_distance = dr.select(new_record, 0.0, record.chain_distance)
+        if has_film:
+            # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
+            is_film = new_record & self.kernels.is_kind(vertex.kind, mat.INTERFERENCE_KINDS)
+            film.pending = dr.select(new_record, is_film, film.pending)
+            thickness = self.kernels.param(vertex.material, mat.FILM_THICKNESS_M)
+            film.separation = dr.select(is_film, vertex.frame.n * thickness, film.separation)
+            film.material = dr.select(is_film, vertex.material, film.material)
+            film.position = dr.select(is_film, vertex.si.p, film.position)
+            film.normal = dr.select(is_film, vertex.frame.n, film.normal)
+            film.transmitted = dr.select(is_film, sampled.film.transmitted, film.transmitted)
+            film.terms = dr.select(is_film, list(sampled.film.terms), list(film.terms))
+        # Through a perfect mirror / refraction the carried vectors follow the beam.
+        through_specular = continue_path & (vertex.specular | film_passthrough) & record.pending
+        record.chain_specular = dr.select(new_record, False, record.chain_specular | through_specular)
+        record.frame_x = dr.select(
+            through_specular, _reflect_vector(record.frame_x, vertex.frame.n), record.frame_x
+        )
+        record.frame_y = dr.select(
+            through_specular, _reflect_vector(record.frame_y, vertex.frame.n), record.frame_y
+        )
+        film.separation = dr.select(
+            through_specular, _reflect_vector(film.separation, vertex.frame.n), film.separation
+        )
+        first_vertex.seen |= vertex.nonspecular
+
+    @dr.syntax
+    def _emitter_light(
+        self, needed: mi.Bool, em_record: mi.UInt32, distance_m: mi.Float, direction: mi.Vector3f
+    ) -> tuple[IncidentCoherence, CoherenceSample]:
+        """The coherence of the light of emitter ``em_record`` at a receiver ``distance_m`` from its centre
+        along ``direction`` (centre → receiver): Σ⊥ of its whole silhouette in a frame ⟂ ``direction``,
+        computed only in the lanes ``needed`` (zero elsewhere), and the diagnostics' record of it."""
+        frame_x = mi.Vector3f(1.0, 0.0, 0.0)
+        frame_y = mi.Vector3f(0.0, 1.0, 0.0)
+        sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
+        angle_terms = (mi.Float(0.0), mi.Float(0.0))
+        if needed:
+            frame_x, frame_y = self._frame_for(direction)
+            sigma = emitter_coherence(
+                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, frame_x, frame_y
+            )
+            angle_terms = self._screen_angle_terms(*sigma, frame_x, frame_y)
+        is_rect = emitter_is_rect(mi, self.context.emitter_flat, em_record)
+        coherence = IncidentCoherence(*sigma, distance_m, frame_x, frame_y, is_rect)
+        return coherence, self._coherence_sample(sigma, distance_m, angle_terms)
+
     # ------------------------------------------------------------------ Mitsuba interface
     def sample(
         self,
@@ -437,6 +604,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             wi = frame.to_local(wi_world)
             continue_path = nonspecular | specular
             continue_path &= path.depth + 1 < self.max_depth
+            vertex = Vertex(si, material, kind, frame, hit_emitter, specular, nonspecular)
 
             # ---------------------- Material sampling (random numbers: NEE, then material) -------
             nee_sample = sampler.next_2d(continue_path & nonspecular)
@@ -466,64 +634,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             em_record = self._emitter_lookup(emitter_ptr)
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
-                em_sigma = emitter_coherence(
-                    mi,
-                    self.context.emitter_flat,
-                    self.context.emitter_kinds,
-                    em_record,
-                    record.frame_x,
-                    record.frame_y,
+                self._resolve(
+                    resolve, vertex, em_record, segment, ray.o, wavelengths, path, record, film, first_vertex
                 )
-                region_sigma, overridden = self._scattering_region(
-                    material, si.n, record.frame_x, record.frame_y
-                )
-                source_sigma = dr.select(hit_emitter, tuple(em_sigma), tuple(region_sigma))
-                if self.plane_waves:
-                    source_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
-                # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
-                # becomes the distance from the segment's origin to that centre.
-                centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray.o)
-                record.chain_distance = dr.select(
-                    hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
-                )
-                resolved = IncidentCoherence(
-                    *source_sigma,
-                    record.chain_distance,
-                    record.frame_x,
-                    record.frame_y,
-                    hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
-                )
-                if has_film:
-                    # An emitter reached straight from the film: its interference phase is taken towards the
-                    # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
-                    centre_phase = (
-                        hit_emitter & ~record.chain_specular & ~film.transmitted & (not self.plane_waves)
-                    )
-                    _, emitter_to_film = emitter_direction(
-                        mi, self.context.emitter_flat, em_record, film.position
-                    )
-                    cos_centre = -dr.dot(emitter_to_film, film.normal)
-                    centre_terms = kernels.film_terms(film.material, cos_centre, wavelengths)
-                    phase_terms = dr.select(centre_phase, list(centre_terms), list(film.terms))
-                    film_factor = film_reflectance(
-                        phase_terms, kernels.visibility, resolved, film.separation, wavelengths
-                    )
-                    # The path was sampled with the incoherent part at its own direction: apply the relative
-                    # interference modulation R(V)/R_incoherent of the phase direction.
-                    film_factor = film_factor / dr.maximum(phase_terms[0], 1e-12)
-                    path.beta = dr.select(resolve & film.pending, path.beta * film_factor, path.beta)
-                record_first = resolve & record.first
-                first_vertex.indirect = dr.select(
-                    record_first,
-                    self._coherence_sample(
-                        source_sigma,
-                        record.chain_distance,
-                        self._screen_angle_terms(*source_sigma, first_vertex.frame_x, first_vertex.frame_y),
-                        ~hit_emitter & ~overridden,
-                    ),
-                    first_vertex.indirect,
-                )
-                first_vertex.indirect_ready |= record_first
             record.pending &= ~resolve
             film.pending &= ~resolve
 
@@ -545,23 +658,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
             # The emitter's Σ⊥ matters for diagnostics at the first non-specular vertex and for
             # coherence-sensitive materials; elsewhere the symbolic branch is skipped.
-            nee_fx = mi.Vector3f(1.0, 0.0, 0.0)
-            nee_fy = mi.Vector3f(0.0, 1.0, 0.0)
-            nee_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
-            nee_angle_terms = (mi.Float(0.0), mi.Float(0.0))
             needs_nee_coherence = do_nee & (~first_vertex.seen | coherence_materials) & (not self.plane_waves)
-            if needs_nee_coherence:
-                nee_fx, nee_fy = self._frame_for(nee_dir)
-                nee_sigma = emitter_coherence(
-                    mi, self.context.emitter_flat, self.context.emitter_kinds, em_record_nee, nee_fx, nee_fy
-                )
-                nee_angle_terms = self._screen_angle_terms(*nee_sigma, nee_fx, nee_fy)
-            nee_coherence = IncidentCoherence(
-                *nee_sigma,
-                nee_r,
-                nee_fx,
-                nee_fy,
-                emitter_is_rect(mi, self.context.emitter_flat, em_record_nee),
+            nee_coherence, direct_sample = self._emitter_light(
+                needs_nee_coherence, em_record_nee, nee_r, nee_dir
             )
             wo_em = frame.to_local(ds_em.d)
             # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
@@ -579,54 +678,16 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             weight_direct = _luminance(y_weights, direct)
             # Direct light at the first non-specular vertex carries the emitter's own Σ⊥; later, the
             # first vertex's resolved record.
-            direct_sample = self._coherence_sample(nee_sigma, nee_r, nee_angle_terms)
             sums.add(dr.select(do_nee & ~first_vertex.seen, weight_direct, 0.0), direct_sample)
             counts_indirect = do_nee & first_vertex.seen & first_vertex.indirect_ready
             sums.add(dr.select(counts_indirect, weight_direct, 0.0), first_vertex.indirect)
 
-            # ---------------------- Start or carry the pending record ----------------------------
+            # ---------------------- Update the path; start or carry the pending record -----------
             path.beta = dr.select(continue_path, path.beta * bs.weight, 0.0)
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
-            # A new record at a non-specular vertex; carried through specular ones. Without thin films only
-            # the first non-specular vertex needs its incident coherence.
-            new_record = continue_path & nonspecular & ~film_passthrough & (~first_vertex.seen | has_film)
-            incoming_fx = mi.Vector3f(record.frame_x)
-            incoming_fy = mi.Vector3f(record.frame_y)
-            if new_record:
-                incoming_fx, incoming_fy = self._frame_for(-wo_world)
-            record.frame_x = dr.select(new_record, incoming_fx, record.frame_x)
-            record.frame_y = dr.select(new_record, incoming_fy, record.frame_y)
-            new_first = new_record & ~first_vertex.seen
-            first_vertex.frame_x = dr.select(new_first, incoming_fx, first_vertex.frame_x)
-            first_vertex.frame_y = dr.select(new_first, incoming_fy, first_vertex.frame_y)
-            first_vertex.direction = dr.select(new_first, wo_world, first_vertex.direction)
-            record.first = dr.select(new_record, ~first_vertex.seen, record.first)
-            record.pending |= new_record
-            record.chain_distance = dr.select(new_record, 0.0, record.chain_distance)
-            if has_film:
-                # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
-                is_film = new_record & kernels.is_kind(kind, mat.INTERFERENCE_KINDS)
-                film.pending = dr.select(new_record, is_film, film.pending)
-                thickness = kernels.param(material, mat.FILM_THICKNESS_M)
-                film.separation = dr.select(is_film, frame.n * thickness, film.separation)
-                film.material = dr.select(is_film, material, film.material)
-                film.position = dr.select(is_film, si.p, film.position)
-                film.normal = dr.select(is_film, frame.n, film.normal)
-                film.transmitted = dr.select(is_film, bs.film.transmitted, film.transmitted)
-                film.terms = dr.select(is_film, list(bs.film.terms), list(film.terms))
-            # Through a perfect mirror / refraction the carried vectors follow the beam.
-            through_specular = continue_path & (specular | film_passthrough) & record.pending
-            record.chain_specular = dr.select(new_record, False, record.chain_specular | through_specular)
-            record.frame_x = dr.select(
-                through_specular, _reflect_vector(record.frame_x, frame.n), record.frame_x
+            self._start_or_carry(
+                vertex, bs, wo_world, continue_path, film_passthrough, record, film, first_vertex
             )
-            record.frame_y = dr.select(
-                through_specular, _reflect_vector(record.frame_y, frame.n), record.frame_y
-            )
-            film.separation = dr.select(
-                through_specular, _reflect_vector(film.separation, frame.n), film.separation
-            )
-            first_vertex.seen |= nonspecular
 
             path.prev_si = si
             path.prev_pdf = bs.pdf
