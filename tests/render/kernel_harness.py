@@ -98,9 +98,7 @@ class KernelProbe:
         )
         frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
         active = mi.Bool(np.ones(wi.shape[0], dtype=bool))
-        value, pdf = self.kernels.eval_pdf(
-            material, local_wi, local_wo, spectrum, coherence, mi.Vector3f(0, 0, 1), frame, active
-        )
+        value, pdf = self.kernels.eval_pdf(material, local_wi, local_wo, spectrum, coherence, frame, active)
         return (
             np.stack([np.asarray(value[j]) for j in range(len(value))], axis=1).astype(float),
             np.asarray(pdf).astype(float),

@@ -1,8 +1,12 @@
 """``hg_path``: a spectral path tracer that carries the coherence of light in Hermite-Gauss space.
 
 Estimator. Unidirectional path tracing from the camera with next-event estimation and MIS (balance
-heuristic, hero-wavelength pdfs, see ``bsdfs``), Russian roulette from ``rr_depth``, and Mitsuba's
-``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination). Emitter surfaces absorb.
+heuristic, hero-wavelength pdfs, see ``worker.render.bsdfs``), Russian roulette from ``rr_depth``, and
+Mitsuba's ``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination); as in prb.py the
+roulette's survival probability is min(max β·η², 0.95), η the product of the refractions' relative indices,
+so the radiance factors 1/η² of refraction are not mistaken for absorption. Emitter surfaces absorb.
+``trace`` reads like Mitsuba's prb.py: its loop state is declared together (the ``loop_struct`` classes
+below) and banner comments mark the phases of a bounce.
 
 Coherence state (paper §5.2: "each traced ray carries the shape matrix, transverse HG coefficients, the
 propagation direction and distance r"). Because paths start at the camera, the coherence of the light a
@@ -32,18 +36,25 @@ receive it from (per-sample sums ``vcz_*``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+import typing
+from dataclasses import dataclass, field, fields
+from typing import NamedTuple
 
 import drjit as dr
 
 from hgcore.artifacts.layout import K_REFERENCE_PER_M, BandLayout
 from hgcore.optics import sources
-from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.frames import transverse_frame_components
 from worker.mitsuba_setup import load_mitsuba
 from worker.render import materials as mat
-from worker.render.bsdfs import IncidentCoherence, MaterialKernels, combine_film_terms
+from worker.render.bsdfs import (
+    IncidentCoherence,
+    MaterialKernels,
+    MaterialParams,
+    MaterialSample,
+    VisibilityModel,
+    film_reflectance,
+)
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect
 
@@ -52,6 +63,17 @@ from worker.render.emitters import emitter_coherence, emitter_direction, emitter
 mi = load_mitsuba()
 OPS = drjit_ops()
 
+T = typing.TypeVar("T")
+
+
+def loop_struct(cls: type[T]) -> type[T]:
+    """A dataclass that Dr.Jit traverses as one piece of symbolic-loop state (``DRJIT_STRUCT`` from the
+    field types); every field has a default, the state's value before the first bounce."""
+    cls = dataclass(cls)
+    hints = typing.get_type_hints(cls)
+    cls.DRJIT_STRUCT = {f.name: typing.get_origin(hints[f.name]) or hints[f.name] for f in fields(cls)}
+    return cls
+
 
 @dataclass
 class RenderContext:
@@ -59,44 +81,176 @@ class RenderContext:
 
     bands: BandLayout
     material_table: mat.MaterialTable
-    material_flat: Any  # mi.Float
-    spectra_flat: Any  # mi.Float
-    shape_material: Any  # mi.UInt32: shape registry id -> material index
-    emitter_flat: Any  # mi.Float
-    emitter_index: Any  # mi.UInt32: emitter registry id -> emitter record
+    material_flat: mi.Float
+    spectra_flat: mi.Float
+    shape_material: mi.UInt32  # shape registry id -> material index
+    emitter_flat: mi.Float
+    emitter_index: mi.UInt32  # emitter registry id -> emitter record
     emitter_kinds: set
     # (n, m) -> ĉ of the universal expansions (Eq. 14) used for visibilities: uniform disks (spheres, disks,
     # scattering regions) and uniform rectangles (rectangles, cylinders seen side-on).
-    disk_coefficients: dict
-    rect_coefficients: dict
+    disk_coefficients: dict[tuple[int, int], float]
+    rect_coefficients: dict[tuple[int, int], float]
     black_material: int  # index of the absorbing material (emitters, misses)
     rect_sources: bool  # whether any emitter is a rectangle or a cylinder
-    camera_position: Any  # world-space centre of projection (Point3f)
-    camera_right: Any  # world-space unit vectors of the image's +x and +y (up) directions
-    camera_up: Any
+    camera_position: mi.Point3f  # world-space centre of projection
+    camera_right: mi.Vector3f  # world-space unit vectors of the image's +x and +y (up) directions
+    camera_up: mi.Vector3f
 
 
 @dataclass
 class PathResult:
-    radiance: Any  # mi.Spectrum at the sample's wavelengths
-    diag_weight: Any
-    diag_mxx: Any
-    diag_mxy: Any
-    diag_myy: Any
-    diag_r: Any
-    diag_cos2: Any
-    diag_sin2: Any
+    radiance: mi.Spectrum  # at the sample's wavelengths
+    diag_weight: mi.Float
+    diag_mxx: mi.Float
+    diag_mxy: mi.Float
+    diag_myy: mi.Float
+    diag_r: mi.Float
+    diag_cos2: mi.Float
+    diag_sin2: mi.Float
     # Light from secondary sources (non-specular surfaces without a region override): its luminance, that
     # times r, and the direction (camera coordinates: right, up, forward) it arrives from at the first vertex.
-    vcz_weight: Any
-    vcz_r: Any
-    vcz_direction: Any
-    depth_m: Any
-    normal: Any
-    albedo: Any
+    vcz_weight: mi.Float
+    vcz_r: mi.Float
+    vcz_direction: mi.Vector3f
+    depth_m: mi.Float
+    normal: mi.Vector3f
+    albedo: mi.Spectrum
 
 
-def _luminance(y_weights: Any, value: Any) -> Any:
+# ---------------------------------------------------------------------------------------- loop state
+@loop_struct
+class PathState:
+    """The estimator's state (as prb.py's loop variables)."""
+
+    L: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(0.0))  # radiance accumulator
+    beta: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(1.0))  # path throughput
+    # Product of the relative indices η of the refractions so far: β·η² is the throughput without the
+    # radiance factors 1/η², which Russian roulette must not mistake for absorption (prb.py).
+    eta: mi.Float = field(default_factory=lambda: mi.Float(1.0))
+    collapsed: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # hero wavelength only (dispersion)
+    depth: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
+    # the previous vertex, for MIS of emission reached by material sampling
+    prev_si: mi.SurfaceInteraction3f = field(default_factory=lambda: dr.zeros(mi.SurfaceInteraction3f))
+    prev_pdf: mi.Float = field(default_factory=lambda: mi.Float(1.0))
+    prev_delta: mi.Bool = field(default_factory=lambda: mi.Bool(True))
+    prev_skip_emission: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # NEE-only lobes
+
+
+@loop_struct
+class PendingRecord:
+    """A non-specular vertex waiting for the coherence of the light it receives (module docstring)."""
+
+    pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
+    first: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # it is the pixel's first such vertex
+    # r: metres since that vertex, accumulated through perfect mirrors and refractions
+    chain_distance: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    # transverse frame of that vertex's incident beam, reflected through the specular chain
+    frame_x: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
+    frame_y: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
+    chain_specular: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # through a mirror/refraction
+
+
+@loop_struct
+class PendingFilm:
+    """The thin film of a pending record (Eq. 18): its value waits for the resolved coherence."""
+
+    pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
+    transmitted: mi.Bool = field(default_factory=lambda: mi.Bool(False))
+    # τ·n̂ (m) between the film's interfaces, carried through the specular chain like the frame
+    separation: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
+    material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
+    position: mi.Point3f = field(default_factory=lambda: mi.Point3f(0.0))
+    normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, 1.0))
+    # [R_incoherent, X_1 …] at the sampled direction (linear in the visibilities V_d); none without films
+    terms: list[mi.Spectrum] = field(default_factory=list)
+
+
+@loop_struct
+class CoherenceSample:
+    """What the diagnostics record of light reaching the first non-specular vertex (BRIEF): M = (k/r)²Σ⊥
+    at λ = 550 nm in that vertex's incident frame, r (m), (cos 2ψ, sin 2ψ) of the ℓ₁ axis on screen;
+    ``secondary``: from a secondary source, whose M comes from the spread of arrival directions (VCZ).
+    As a sum (``DiagnosticSums.moments``) the same fields hold Σw·M, Σw·r, Σw·(cos 2ψ, sin 2ψ)."""
+
+    m_xx: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    m_xy: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    m_yy: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    r: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    cos2: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    sin2: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    secondary: mi.Bool = field(default_factory=lambda: mi.Bool(False))
+
+    def accumulate(self, weight: mi.Float, sample: CoherenceSample) -> None:
+        """Add ``weight`` × ``sample`` to these sums."""
+        self.m_xx += weight * sample.m_xx
+        self.m_xy += weight * sample.m_xy
+        self.m_yy += weight * sample.m_yy
+        self.r += weight * sample.r
+        self.cos2 += weight * sample.cos2
+        self.sin2 += weight * sample.sin2
+
+
+@loop_struct
+class FirstVertex:
+    """The pixel's first non-specular vertex, whose incident coherence the diagnostics report."""
+
+    seen: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # the path has passed it
+    frame_x: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))  # its incident frame
+    frame_y: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
+    direction: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, 1.0))  # sampled from it
+    indirect_ready: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # its record is resolved
+    indirect: CoherenceSample = field(default_factory=CoherenceSample)  # … to this
+
+
+@loop_struct
+class DiagnosticSums:
+    """Luminance-weighted per-sample sums of the coherence diagnostics (BRIEF; the renderer's ``diag_*``
+    and ``vcz_*``): Σw and the ``moments`` Σw·M, Σw·r, Σw·(cos 2ψ, sin 2ψ); light from secondary sources
+    goes to Σw_vcz and Σw_vcz·r instead."""
+
+    weight: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    moments: CoherenceSample = field(default_factory=CoherenceSample)
+    vcz_weight: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    vcz_r: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+
+    def add(self, weight: mi.Float, sample: CoherenceSample) -> None:
+        """Count light of luminance ``weight`` (0 in lanes that do not count) described by ``sample``."""
+        vcz = dr.select(sample.secondary, weight, 0.0)
+        w = dr.select(sample.secondary, 0.0, weight)
+        self.vcz_weight += vcz
+        self.vcz_r += vcz * sample.r
+        self.weight += w
+        self.moments.accumulate(w, sample)
+
+
+@loop_struct
+class FirstHit:
+    """AOVs of the camera-visible surface."""
+
+    depth_m: mi.Float = field(default_factory=lambda: mi.Float(0.0))  # from the centre of projection
+    normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
+    material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
+
+
+class Vertex(NamedTuple):
+    """The bounce's surface as the coherence bookkeeping reads it (one per loop iteration)."""
+
+    si: mi.SurfaceInteraction3f
+    material: mi.UInt32
+    kind: mi.UInt32
+    frame: mi.Frame3f  # shading frame, flipped towards the incident side where two-sided
+    hit_emitter: mi.Bool
+    specular: mi.Bool
+    nonspecular: mi.Bool
+
+
+def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
+    """Balance heuristic p_a/(p_a + p_b) of the strategy with density ``pdf_a`` (hero-MIS densities)."""
+    return pdf_a / dr.maximum(pdf_a + pdf_b, 1e-20)
+
+
+def _luminance(y_weights: list[mi.Float], value: mi.Spectrum) -> mi.Float:
     """Y of a four-wavelength spectral estimate: Σ_j w_j·value_j with w_j = (Λ/4)·ȳ(λ_j) (CIE 1931 ȳ)."""
     total = mi.Float(0.0)
     for j in range(len(y_weights)):
@@ -104,7 +258,7 @@ def _luminance(y_weights: Any, value: Any) -> Any:
     return total
 
 
-def _reflect_vector(vector: Any, normal: Any) -> Any:
+def _reflect_vector(vector: mi.Vector3f, normal: mi.Vector3f) -> mi.Vector3f:
     """Mirror image of a (free) vector in the plane with unit ``normal``."""
     return vector - 2.0 * dr.dot(vector, normal) * normal
 
@@ -126,42 +280,24 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
     def attach(self, context: RenderContext) -> None:
         self.context = context
-        self.kernels = MaterialKernels(
-            mi,
-            context.material_flat,
-            context.spectra_flat,
-            context.material_table,
-            visibility=self.visibility,
+        visibility = VisibilityModel(
+            context.disk_coefficients, context.rect_coefficients, bool(context.rect_sources)
         )
+        params = MaterialParams(
+            context.material_flat, context.spectra_flat, context.material_table, visibility
+        )
+        self.kernels = MaterialKernels(params)
 
     # ------------------------------------------------------------------ coherence helpers
-    def visibility(self, coherence: IncidentCoherence, separation_world: Any, wavelengths: Any) -> Any:
-        """μ at the transverse part of ``separation_world`` (m) for each wavelength (Def. 4.1 / Eq. 18)."""
-        xi = (dr.dot(separation_world, coherence.frame_x), dr.dot(separation_world, coherence.frame_y))
-        sigma = (coherence.sigma_xx, coherence.sigma_xy, coherence.sigma_yy)
-        result = mi.Spectrum(0.0)
-        distance = dr.maximum(coherence.distance_m, 1e-9)
-        context = self.context
-        # With one mode both expansions are the same Gaussian: evaluate the rectangle's only when it differs.
-        needs_rect = context.rect_coefficients != context.disk_coefficients and bool(context.rect_sources)
-        for j in range(len(wavelengths)):
-            wavelength_m = wavelengths[j] * 1e-9
-            mu = degree_of_coherence(xi, sigma, distance, wavelength_m, context.disk_coefficients, OPS)
-            if needs_rect:
-                mu_rect = degree_of_coherence(
-                    xi, sigma, distance, wavelength_m, context.rect_coefficients, OPS
-                )
-                mu = dr.select(coherence.rect_source, mu_rect, mu)
-            result[j] = mu
-        return result
-
-    def _frame_for(self, direction: Any) -> tuple[Any, Any]:
+    def _frame_for(self, direction: mi.Vector3f) -> tuple[mi.Vector3f, mi.Vector3f]:
         x_axis, y_axis = transverse_frame_components(
             (direction.x, direction.y, direction.z), tuple(self.context.camera_right), OPS
         )
         return mi.Vector3f(*x_axis), mi.Vector3f(*y_axis)
 
-    def _scattering_region(self, material: Any, normal: Any, frame_x: Any, frame_y: Any):
+    def _scattering_region(
+        self, material: mi.UInt32, normal: mi.Vector3f, frame_x: mi.Vector3f, frame_y: mi.Vector3f
+    ) -> tuple[tuple[mi.Float, mi.Float, mi.Float], mi.Bool]:
         """(Σ⊥, overridden) of the secondary source a path reaches at a non-specular vertex, in the frame ⟂
         to the direction it is seen along.
 
@@ -178,7 +314,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         )
         return sigma, radius > 0.0
 
-    def _camera_coordinates(self, direction: Any) -> Any:
+    def _camera_coordinates(self, direction: mi.Vector3f) -> mi.Vector3f:
         """``direction`` in the camera's (right, up, forward) basis (orthonormal: covariances are kept)."""
         context = self.context
         forward = dr.cross(context.camera_right, context.camera_up)
@@ -188,13 +324,13 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             dr.dot(direction, forward),
         )
 
-    def _emitter_lookup(self, emitter_ptr: Any) -> Any:
+    def _emitter_lookup(self, emitter_ptr: mi.EmitterPtr) -> mi.UInt32:
         registry_id = dr.reinterpret_array(mi.UInt32, emitter_ptr)
         return dr.gather(mi.UInt32, self.context.emitter_index, registry_id)
 
     def _screen_angle_terms(
-        self, sxx: Any, sxy: Any, syy: Any, frame_x: Any, frame_y: Any
-    ) -> tuple[Any, Any]:
+        self, sxx: mi.Float, sxy: mi.Float, syy: mi.Float, frame_x: mi.Vector3f, frame_y: mi.Vector3f
+    ) -> tuple[mi.Float, mi.Float]:
         """(cos 2ψ, sin 2ψ) of the screen-space angle ψ of the ℓ₁ axis (smallest eigenvalue of Σ⊥).
 
         Algebraic throughout (no trigonometry in the kernel): the ℓ₁ axis of [[a, b], [b, c]] has doubled
@@ -218,6 +354,178 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             dr.select(isotropic, 0.0, (x * x - y * y) / norm2),
             dr.select(isotropic, 0.0, 2.0 * x * y / norm2),
         )
+
+    def _coherence_sample(
+        self,
+        sigma: tuple[mi.Float, mi.Float, mi.Float],
+        distance_m: mi.Float,
+        angle_terms: tuple[mi.Float, mi.Float],
+        secondary: mi.Bool | bool = False,
+    ) -> CoherenceSample:
+        """The diagnostics' record of light with Σ⊥ ``sigma`` after r = ``distance_m`` (m), whose ℓ₁ axis
+        has the screen angle terms ``angle_terms`` (``_screen_angle_terms``)."""
+        scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(distance_m, 1e-9))
+        return CoherenceSample(
+            scale2 * sigma[0],
+            scale2 * sigma[1],
+            scale2 * sigma[2],
+            distance_m,
+            *angle_terms,
+            mi.Bool(secondary),
+        )
+
+    def _resolve(
+        self,
+        resolve: mi.Bool,
+        vertex: Vertex,
+        em_record: mi.UInt32,
+        segment: mi.Float,
+        ray_origin: mi.Point3f,
+        wavelengths: mi.Spectrum,
+        path: PathState,
+        record: PendingRecord,
+        film: PendingFilm,
+        first_vertex: FirstVertex,
+    ) -> None:
+        """Resolve the pending record in the lanes ``resolve``: its source is what the path reached — the
+        emitter hit (its whole silhouette, from its centre) or a non-specular surface (a secondary source:
+        one point, or its scattering region) — seen in the record's frame after r = ``chain_distance``. A
+        pending film's throughput is rescaled by R(V)/R_incoherent; the pixel's first record becomes the
+        diagnostics' ``first_vertex.indirect``."""
+        em_sigma = emitter_coherence(
+            mi,
+            self.context.emitter_flat,
+            self.context.emitter_kinds,
+            em_record,
+            record.frame_x,
+            record.frame_y,
+        )
+        region_sigma, overridden = self._scattering_region(
+            vertex.material, vertex.si.n, record.frame_x, record.frame_y
+        )
+        source_sigma = dr.select(vertex.hit_emitter, tuple(em_sigma), tuple(region_sigma))
+        if self.plane_waves:
+            source_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
+        # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
+        # becomes the distance from the segment's origin to that centre.
+        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray_origin)
+        record.chain_distance = dr.select(
+            vertex.hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
+        )
+        resolved = IncidentCoherence(
+            *source_sigma,
+            record.chain_distance,
+            record.frame_x,
+            record.frame_y,
+            vertex.hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
+        )
+        if self.kernels.has(mat.INTERFERENCE_KINDS):
+            # An emitter reached straight from the film: its interference phase is taken towards the
+            # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
+            centre_phase = (
+                vertex.hit_emitter & ~record.chain_specular & ~film.transmitted & (not self.plane_waves)
+            )
+            _, emitter_to_film = emitter_direction(mi, self.context.emitter_flat, em_record, film.position)
+            cos_centre = -dr.dot(emitter_to_film, film.normal)
+            centre_terms = self.kernels.film_terms(film.material, cos_centre, wavelengths)
+            phase_terms = dr.select(centre_phase, list(centre_terms), list(film.terms))
+            film_factor = film_reflectance(
+                phase_terms, self.kernels.visibility, resolved, film.separation, wavelengths
+            )
+            # The path was sampled with the incoherent part at its own direction: apply the relative
+            # interference modulation R(V)/R_incoherent of the phase direction.
+            film_factor = film_factor / dr.maximum(phase_terms[0], 1e-12)
+            path.beta = dr.select(resolve & film.pending, path.beta * film_factor, path.beta)
+        record_first = resolve & record.first
+        first_vertex.indirect = dr.select(
+            record_first,
+            self._coherence_sample(
+                source_sigma,
+                record.chain_distance,
+                self._screen_angle_terms(*source_sigma, first_vertex.frame_x, first_vertex.frame_y),
+                ~vertex.hit_emitter & ~overridden,
+            ),
+            first_vertex.indirect,
+        )
+        first_vertex.indirect_ready |= record_first
+
+    @dr.syntax
+    def _start_or_carry(
+        self,
+        vertex: Vertex,
+        sampled: MaterialSample,
+        wo_world: mi.Vector3f,
+        continue_path: mi.Bool,
+        film_passthrough: mi.Bool,
+        record: PendingRecord,
+        film: PendingFilm,
+        first_vertex: FirstVertex,
+    ) -> None:
+        """Start a pending record at a non-specular vertex (its incident frame ⟂ the sampled direction; a
+        thin film's separation and terms), or carry the pending one through a perfect mirror or refraction
+        (r keeps growing, the frame and the film's separation are reflected with the beam)."""
+        has_film = self.kernels.has(mat.INTERFERENCE_KINDS)
+        # A new record at a non-specular vertex; carried through specular ones. Without thin films only
+        # the first non-specular vertex needs its incident coherence.
+        new_record = continue_path & vertex.nonspecular & ~film_passthrough & (~first_vertex.seen | has_film)
+        incoming_fx = mi.Vector3f(record.frame_x)
+        incoming_fy = mi.Vector3f(record.frame_y)
+        if new_record:
+            incoming_fx, incoming_fy = self._frame_for(-wo_world)
+        record.frame_x = dr.select(new_record, incoming_fx, record.frame_x)
+        record.frame_y = dr.select(new_record, incoming_fy, record.frame_y)
+        new_first = new_record & ~first_vertex.seen
+        first_vertex.frame_x = dr.select(new_first, incoming_fx, first_vertex.frame_x)
+        first_vertex.frame_y = dr.select(new_first, incoming_fy, first_vertex.frame_y)
+        first_vertex.direction = dr.select(new_first, wo_world, first_vertex.direction)
+        record.first = dr.select(new_record, ~first_vertex.seen, record.first)
+        record.pending |= new_record
+        record.chain_distance = dr.select(new_record, 0.0, record.chain_distance)
+        if has_film:
+            # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
+            is_film = new_record & self.kernels.is_kind(vertex.kind, mat.INTERFERENCE_KINDS)
+            film.pending = dr.select(new_record, is_film, film.pending)
+            thickness = self.kernels.param(vertex.material, mat.FILM_THICKNESS_M)
+            film.separation = dr.select(is_film, vertex.frame.n * thickness, film.separation)
+            film.material = dr.select(is_film, vertex.material, film.material)
+            film.position = dr.select(is_film, vertex.si.p, film.position)
+            film.normal = dr.select(is_film, vertex.frame.n, film.normal)
+            film.transmitted = dr.select(is_film, sampled.film.transmitted, film.transmitted)
+            film.terms = dr.select(is_film, list(sampled.film.terms), list(film.terms))
+        # Through a perfect mirror / refraction the carried vectors follow the beam.
+        through_specular = continue_path & (vertex.specular | film_passthrough) & record.pending
+        record.chain_specular = dr.select(new_record, False, record.chain_specular | through_specular)
+        record.frame_x = dr.select(
+            through_specular, _reflect_vector(record.frame_x, vertex.frame.n), record.frame_x
+        )
+        record.frame_y = dr.select(
+            through_specular, _reflect_vector(record.frame_y, vertex.frame.n), record.frame_y
+        )
+        film.separation = dr.select(
+            through_specular, _reflect_vector(film.separation, vertex.frame.n), film.separation
+        )
+        first_vertex.seen |= vertex.nonspecular
+
+    @dr.syntax
+    def _emitter_light(
+        self, needed: mi.Bool, em_record: mi.UInt32, distance_m: mi.Float, direction: mi.Vector3f
+    ) -> tuple[IncidentCoherence, CoherenceSample]:
+        """The coherence of the light of emitter ``em_record`` at a receiver ``distance_m`` from its centre
+        along ``direction`` (centre → receiver): Σ⊥ of its whole silhouette in a frame ⟂ ``direction``,
+        computed only in the lanes ``needed`` (zero elsewhere), and the diagnostics' record of it."""
+        frame_x = mi.Vector3f(1.0, 0.0, 0.0)
+        frame_y = mi.Vector3f(0.0, 1.0, 0.0)
+        sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
+        angle_terms = (mi.Float(0.0), mi.Float(0.0))
+        if needed:
+            frame_x, frame_y = self._frame_for(direction)
+            sigma = emitter_coherence(
+                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, frame_x, frame_y
+            )
+            angle_terms = self._screen_angle_terms(*sigma, frame_x, frame_y)
+        is_rect = emitter_is_rect(mi, self.context.emitter_flat, em_record)
+        coherence = IncidentCoherence(*sigma, distance_m, frame_x, frame_y, is_rect)
+        return coherence, self._coherence_sample(sigma, distance_m, angle_terms)
 
     # ------------------------------------------------------------------ Mitsuba interface
     def sample(
@@ -243,211 +551,106 @@ class HGPathIntegrator(mi.SamplingIntegrator):
     # ------------------------------------------------------------------ the path loop
     @dr.syntax
     def trace(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active: mi.Bool) -> PathResult:
-        kinds = self.context.material_table.kinds
-        has_film = mat.MaterialKind.THIN_FILM in kinds
-        has_grating = mat.MaterialKind.GRATING in kinds
+        # (``self.context`` is read through ``self``: a dataclass local would become loop state.)
+        kernels = self.kernels
+        has_film = kernels.has(mat.INTERFERENCE_KINDS)
+        has_nee_only = kernels.has(mat.NEE_ONLY_KINDS)
+        coherence_materials = has_film or has_nee_only  # materials whose value depends on Σ⊥
         span_nm = self.context.bands.wavelength_max_nm - self.context.bands.wavelength_min_nm
-        film_beams = self.kernels.max_beams
-        coherence_materials = has_film or has_grating
 
         wavelengths = mi.Spectrum(ray.wavelengths)
         y_weights = [
             mi.cie1931_y(wavelengths[j]) * (span_nm / len(wavelengths)) for j in range(len(wavelengths))
         ]
-        L = mi.Spectrum(0.0)
-        beta = mi.Spectrum(1.0)
-        eta_scale = mi.Float(1.0)
-        collapsed = mi.Bool(False)  # only the hero wavelength is left (dispersive refraction)
-        depth = mi.UInt32(0)
-        prev_si = dr.zeros(mi.SurfaceInteraction3f)
-        prev_pdf = mi.Float(1.0)
-        prev_delta = mi.Bool(True)
-        prev_skip_emission = mi.Bool(False)
-        # pending coherence resolution (see module docstring)
-        pending = mi.Bool(False)
-        pending_first = mi.Bool(False)
-        chain_distance = mi.Float(0.0)
-        frame_x = mi.Vector3f(0.0)
-        frame_y = mi.Vector3f(0.0)
-        first_frame_x = mi.Vector3f(0.0)
-        first_frame_y = mi.Vector3f(0.0)
-        film_pending = mi.Bool(False)
-        film_transmitted = mi.Bool(False)
-        film_separation = mi.Vector3f(0.0)
-        film_material = mi.UInt32(0)
-        film_position = mi.Point3f(0.0)
-        film_normal = mi.Vector3f(0.0, 0.0, 1.0)
-        chain_specular = mi.Bool(False)
-        film_terms = [mi.Spectrum(0.0) for _ in range(film_beams if has_film else 0)]
-        # diagnostics accumulators
-        seen_nonspecular = mi.Bool(False)
-        indirect_ready = mi.Bool(False)
-        ind_mxx = mi.Float(0.0)
-        ind_mxy = mi.Float(0.0)
-        ind_myy = mi.Float(0.0)
-        ind_r = mi.Float(0.0)
-        ind_c2 = mi.Float(0.0)
-        ind_s2 = mi.Float(0.0)
-        d_w = mi.Float(0.0)
-        d_mxx = mi.Float(0.0)
-        d_mxy = mi.Float(0.0)
-        d_myy = mi.Float(0.0)
-        d_r = mi.Float(0.0)
-        d_c2 = mi.Float(0.0)
-        d_s2 = mi.Float(0.0)
-        # light from secondary sources (VCZ estimate from the spread of its arrival directions)
-        ind_vcz = mi.Bool(False)
-        first_direction = mi.Vector3f(0.0, 0.0, 1.0)
-        v_w = mi.Float(0.0)
-        v_r = mi.Float(0.0)
-        aov_depth = mi.Float(0.0)
-        aov_normal = mi.Vector3f(0.0)
-        aov_material = mi.UInt32(self.context.black_material)
+        # Loop state (Dr.Jit traverses each struct): the estimator, the pending coherence record and its
+        # film, the first non-specular vertex, the diagnostics sums and the first-hit AOVs.
+        path = PathState()
+        record = PendingRecord()
+        film = PendingFilm(terms=[mi.Spectrum(0.0) for _ in range(kernels.max_beams if has_film else 0)])
+        first_vertex = FirstVertex()
+        sums = DiagnosticSums()
+        aov = FirstHit(material=mi.UInt32(self.context.black_material))
 
         while dr.hint(active, max_iterations=self.max_depth + 1, label="hg_path"):
-            si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
+            # ---------------------- Intersect and classify the vertex ----------------------
+            si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=path.depth == 0, active=active)
             valid = active & si.is_valid()
             segment = dr.select(valid, si.t, 0.0)
-            chain_distance += segment
+            record.chain_distance += segment
 
             material = dr.gather(
                 mi.UInt32, self.context.shape_material, dr.reinterpret_array(mi.UInt32, si.shape), valid
             )
-            kind = self.kernels.kind(material)
+            kind = kernels.kind(material)
             emitter_ptr = si.emitter(scene, valid)
             hit_emitter = valid & (emitter_ptr != None)  # noqa: E711 - Dr.Jit pointer comparison
-            specular = valid & self.kernels.is_specular(material) & ~hit_emitter
+            specular = valid & kernels.is_specular(material) & ~hit_emitter
             nonspecular = valid & ~specular & ~hit_emitter
+            nee_only = kernels.is_kind(kind, mat.NEE_ONLY_KINDS)
 
-            # First-hit AOVs (camera-visible surface).
-            first = valid & (depth == 0)
+            # ---------------------- First-hit AOVs (camera-visible surface) ----------------------
+            first_hit = valid & (path.depth == 0)
             # Distance from the camera's centre (rays start on the near-clip plane, so si.t is shorter).
-            aov_depth = dr.select(first, dr.norm(si.p - self.context.camera_position), aov_depth)
-            aov_normal = dr.select(first, si.sh_frame.n, aov_normal)
-            aov_material = dr.select(first, material, aov_material)
+            aov.depth_m = dr.select(first_hit, dr.norm(si.p - self.context.camera_position), aov.depth_m)
+            aov.normal = dr.select(first_hit, si.sh_frame.n, aov.normal)
+            aov.material = dr.select(first_hit, material, aov.material)
 
-            # --- shading frame (two-sided except for interfaces that transmit)
+            # ---------------------- Shading frame (two-sided except transmitting interfaces) ------
             frame = mi.Frame3f(si.sh_frame)
             wi_world = -ray.d
-            flip = (dr.dot(wi_world, frame.n) < 0) & self.kernels.two_sided(material)
+            flip = (dr.dot(wi_world, frame.n) < 0) & kernels.two_sided(material)
             frame.n = dr.select(flip, -frame.n, frame.n)
             frame.t = dr.select(flip, -frame.t, frame.t)
             wi = frame.to_local(wi_world)
             continue_path = nonspecular | specular
-            continue_path &= depth + 1 < self.max_depth
+            continue_path &= path.depth + 1 < self.max_depth
+            vertex = Vertex(si, material, kind, frame, hit_emitter, specular, nonspecular)
 
-            # --- sample the next direction (random numbers drawn in the order: NEE, then material)
+            # ---------------------- Material sampling (random numbers: NEE, then material) -------
             nee_sample = sampler.next_2d(continue_path & nonspecular)
-            wo, weight, pdf, delta, sampled_film_terms, sampled_film_transmitted = self.kernels.sample(
+            bs = kernels.sample(
                 material,
                 wi,
                 wavelengths,
                 sampler.next_1d(continue_path),
                 sampler.next_2d(continue_path),
                 continue_path,
-                collapsed,
+                path.collapsed,
             )
-            wo_world = frame.to_world(wo)
+            wo_world = frame.to_world(bs.wo)
             # A Dirac refraction through a dispersive medium leaves the hero wavelength only (bsdfs).
-            refracted = continue_path & delta & (wi.z * wo.z < 0)
-            collapsed |= refracted & (self.kernels.param(material, mat.DISPERSIVE) > 0.5)
+            refracted = continue_path & bs.delta & (wi.z * bs.wo.z < 0)
+            path.collapsed |= refracted & (kernels.param(material, mat.DISPERSIVE) > 0.5)
             # A film on glass reflecting or refracting specularly keeps a pending record's coherence, like
             # smooth glass (the coated ball's far side passes on the light it transmits); its own
             # interference then uses the incoherent sum it was sampled with.
             film_passthrough = mi.Bool(False)
             if has_film:
-                film_passthrough = nonspecular & pending & delta
-                film_passthrough &= self.kernels.param(material, mat.FILM_TRANSMITS) > 0.5
+                film_passthrough = nonspecular & record.pending & bs.delta
+                film_passthrough &= kernels.param(material, mat.FILM_TRANSMITS) > 0.5
 
-            # --- resolve the pending vertex's incident coherence: the source is what we just reached
-            resolve = pending & (hit_emitter | (nonspecular & ~film_passthrough))
+            # ---------------------- Resolve the pending record: its source is what we reached ----
+            resolve = record.pending & (hit_emitter | (nonspecular & ~film_passthrough))
             em_record = self._emitter_lookup(emitter_ptr)
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
-                em_sxx, em_sxy, em_syy = emitter_coherence(
-                    mi,
-                    self.context.emitter_flat,
-                    self.context.emitter_kinds,
-                    em_record,
-                    frame_x,
-                    frame_y,
+                self._resolve(
+                    resolve, vertex, em_record, segment, ray.o, wavelengths, path, record, film, first_vertex
                 )
-                (sr_xx, sr_xy, sr_yy), overridden = self._scattering_region(material, si.n, frame_x, frame_y)
-                src_xx = dr.select(hit_emitter, em_sxx, sr_xx)
-                src_xy = dr.select(hit_emitter, em_sxy, sr_xy)
-                src_yy = dr.select(hit_emitter, em_syy, sr_yy)
-                if self.plane_waves:
-                    src_xx, src_xy, src_yy = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
-                # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
-                # becomes the distance from the segment's origin to that centre.
-                centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray.o)
-                chain_distance = dr.select(
-                    hit_emitter, chain_distance - segment + centre_distance, chain_distance
-                )
-                resolved = IncidentCoherence(
-                    src_xx,
-                    src_xy,
-                    src_yy,
-                    chain_distance,
-                    frame_x,
-                    frame_y,
-                    hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
-                )
-                if has_film:
-                    # An emitter reached straight from the film: its interference phase is taken towards the
-                    # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
-                    centre_phase = hit_emitter & ~chain_specular & ~film_transmitted & (not self.plane_waves)
-                    _, emitter_to_film = emitter_direction(
-                        mi, self.context.emitter_flat, em_record, film_position
-                    )
-                    cos_centre = -dr.dot(emitter_to_film, film_normal)
-                    centre_terms = self.kernels.film_terms(film_material, cos_centre, wavelengths)
-                    phase_terms = list(film_terms)
-                    for slot in range(film_beams):
-                        phase_terms[slot] = dr.select(centre_phase, centre_terms[slot], film_terms[slot])
-                    film_factor = combine_film_terms(
-                        phase_terms,
-                        lambda d, c=resolved, v=film_separation: self.visibility(c, v * d, wavelengths),
-                    )
-                    # The path was sampled with the incoherent part at its own direction: apply the relative
-                    # interference modulation R(V)/R_incoherent of the phase direction.
-                    film_factor = film_factor / dr.maximum(phase_terms[0], 1e-12)
-                    beta = dr.select(resolve & film_pending, beta * film_factor, beta)
-                record_indirect = resolve & pending_first
-                scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(chain_distance, 1e-9))
-                c2, s2 = self._screen_angle_terms(src_xx, src_xy, src_yy, first_frame_x, first_frame_y)
-                ind_mxx = dr.select(record_indirect, scale2 * src_xx, ind_mxx)
-                ind_mxy = dr.select(record_indirect, scale2 * src_xy, ind_mxy)
-                ind_myy = dr.select(record_indirect, scale2 * src_yy, ind_myy)
-                ind_r = dr.select(record_indirect, chain_distance, ind_r)
-                ind_c2 = dr.select(record_indirect, c2, ind_c2)
-                ind_s2 = dr.select(record_indirect, s2, ind_s2)
-                ind_vcz = dr.select(record_indirect, ~hit_emitter & ~overridden, ind_vcz)
-                indirect_ready |= record_indirect
-            pending &= ~resolve
-            film_pending &= ~resolve
+            record.pending &= ~resolve
+            film.pending &= ~resolve
 
-            # --- emission reached by BSDF sampling (MIS with the previous vertex's NEE)
-            ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-            em_pdf = scene.pdf_emitter_direction(prev_si, ds, ~prev_delta)
-            mis = dr.select(prev_delta, 1.0, prev_pdf / dr.maximum(prev_pdf + em_pdf, 1e-20))
-            mis = dr.select(prev_skip_emission, 0.0, mis)
-            emitted = dr.select(hit_emitter, beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)
-            L += emitted
-            weight_em = _luminance(y_weights, emitted)
-            add_indirect = indirect_ready & seen_nonspecular
-            v_w += dr.select(add_indirect & ind_vcz, weight_em, 0.0)
-            v_r += dr.select(add_indirect & ind_vcz, weight_em * ind_r, 0.0)
-            add_indirect &= ~ind_vcz
-            d_w += dr.select(add_indirect, weight_em, 0.0)
-            d_mxx += dr.select(add_indirect, weight_em * ind_mxx, 0.0)
-            d_mxy += dr.select(add_indirect, weight_em * ind_mxy, 0.0)
-            d_myy += dr.select(add_indirect, weight_em * ind_myy, 0.0)
-            d_r += dr.select(add_indirect, weight_em * ind_r, 0.0)
-            d_c2 += dr.select(add_indirect, weight_em * ind_c2, 0.0)
-            d_s2 += dr.select(add_indirect, weight_em * ind_s2, 0.0)
+            # ---------------------- Emission reached by material sampling (MIS with NEE) ---------
+            ds = mi.DirectionSample3f(scene, si=si, ref=path.prev_si)
+            em_pdf = scene.pdf_emitter_direction(path.prev_si, ds, ~path.prev_delta)
+            mis = dr.select(path.prev_delta, 1.0, mis_weight(path.prev_pdf, em_pdf))
+            mis = dr.select(path.prev_skip_emission, 0.0, mis)
+            emitted = dr.select(hit_emitter, path.beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)
+            path.L += emitted
+            counts_indirect = first_vertex.indirect_ready & first_vertex.seen
+            sums.add(dr.select(counts_indirect, _luminance(y_weights, emitted), 0.0), first_vertex.indirect)
 
-            # --- next-event estimation at non-specular vertices
+            # ---------------------- Emitter sampling (next-event estimation) ---------------------
             do_nee = continue_path & nonspecular
             ds_em, em_weight = scene.sample_emitter_direction(si, nee_sample, True, do_nee)
             do_nee &= ds_em.pdf != 0.0
@@ -455,138 +658,68 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
             # The emitter's Σ⊥ matters for diagnostics at the first non-specular vertex and for
             # coherence-sensitive materials; elsewhere the symbolic branch is skipped.
-            nee_fx = mi.Vector3f(1.0, 0.0, 0.0)
-            nee_fy = mi.Vector3f(0.0, 1.0, 0.0)
-            nee_sxx = mi.Float(0.0)
-            nee_sxy = mi.Float(0.0)
-            nee_syy = mi.Float(0.0)
-            nee_c2 = mi.Float(0.0)
-            nee_s2 = mi.Float(0.0)
-            needs_nee_coherence = do_nee & (~seen_nonspecular | coherence_materials) & (not self.plane_waves)
-            if needs_nee_coherence:
-                nee_fx, nee_fy = self._frame_for(nee_dir)
-                nee_sxx, nee_sxy, nee_syy = emitter_coherence(
-                    mi,
-                    self.context.emitter_flat,
-                    self.context.emitter_kinds,
-                    em_record_nee,
-                    nee_fx,
-                    nee_fy,
-                )
-                nee_c2, nee_s2 = self._screen_angle_terms(nee_sxx, nee_sxy, nee_syy, nee_fx, nee_fy)
-            nee_coherence = IncidentCoherence(
-                nee_sxx,
-                nee_sxy,
-                nee_syy,
-                nee_r,
-                nee_fx,
-                nee_fy,
-                emitter_is_rect(mi, self.context.emitter_flat, em_record_nee),
+            needs_nee_coherence = do_nee & (~first_vertex.seen | coherence_materials) & (not self.plane_waves)
+            nee_coherence, direct_sample = self._emitter_light(
+                needs_nee_coherence, em_record_nee, nee_r, nee_dir
             )
             wo_em = frame.to_local(ds_em.d)
             # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
             # and a thin film's interference phase; the sampled point serves the radiometric terms only.
             wo_centre = wo_em if self.plane_waves else frame.to_local(-nee_dir)
             wo_eval = wo_em
-            if has_grating:
-                wo_eval = dr.select(kind == int(mat.MaterialKind.GRATING), wo_centre, wo_em)
-            bsdf_value, bsdf_pdf = self.kernels.eval_pdf(
-                material, wi, wo_eval, wavelengths, nee_coherence, frame.n, frame, do_nee, wo_phase=wo_centre
+            if has_nee_only:
+                wo_eval = dr.select(nee_only, wo_centre, wo_em)
+            bsdf_value, bsdf_pdf = kernels.eval_pdf(
+                material, wi, wo_eval, wavelengths, nee_coherence, frame, do_nee, wo_phase=wo_centre
             )
-            mis_em = dr.select(ds_em.delta, 1.0, ds_em.pdf / dr.maximum(ds_em.pdf + bsdf_pdf, 1e-20))
-            if has_grating:
-                mis_em = dr.select(kind == int(mat.MaterialKind.GRATING), 1.0, mis_em)
-            direct = dr.select(do_nee, beta * bsdf_value * em_weight * mis_em, 0.0)
-            L += direct
+            mis_em = dr.select(ds_em.delta | nee_only, 1.0, mis_weight(ds_em.pdf, bsdf_pdf))
+            direct = dr.select(do_nee, path.beta * bsdf_value * em_weight * mis_em, 0.0)
+            path.L += direct
             weight_direct = _luminance(y_weights, direct)
-            # Direct light at the first non-specular vertex: the emitter's own Σ⊥ (camera-aligned frame).
-            at_first = do_nee & ~seen_nonspecular
-            nee_scale2 = dr.square(K_REFERENCE_PER_M / dr.maximum(nee_r, 1e-9))
-            direct_m = (nee_scale2 * nee_sxx, nee_scale2 * nee_sxy, nee_scale2 * nee_syy)
-            use_ind = do_nee & seen_nonspecular & indirect_ready
-            v_w += dr.select(use_ind & ind_vcz, weight_direct, 0.0)
-            v_r += dr.select(use_ind & ind_vcz, weight_direct * ind_r, 0.0)
-            use_ind &= ~ind_vcz
-            w_first = dr.select(at_first, weight_direct, 0.0)
-            w_later = dr.select(use_ind, weight_direct, 0.0)
-            d_w += w_first + w_later
-            d_mxx += w_first * direct_m[0] + w_later * ind_mxx
-            d_mxy += w_first * direct_m[1] + w_later * ind_mxy
-            d_myy += w_first * direct_m[2] + w_later * ind_myy
-            d_r += w_first * nee_r + w_later * ind_r
-            d_c2 += w_first * nee_c2 + w_later * ind_c2
-            d_s2 += w_first * nee_s2 + w_later * ind_s2
+            # Direct light at the first non-specular vertex carries the emitter's own Σ⊥; later, the
+            # first vertex's resolved record.
+            sums.add(dr.select(do_nee & ~first_vertex.seen, weight_direct, 0.0), direct_sample)
+            counts_indirect = do_nee & first_vertex.seen & first_vertex.indirect_ready
+            sums.add(dr.select(counts_indirect, weight_direct, 0.0), first_vertex.indirect)
 
-            beta = dr.select(continue_path, beta * weight, 0.0)
-
-            # Start a new pending record at a non-specular vertex; carry it through specular ones.
-            # Without thin films only the first non-specular vertex needs its incident coherence.
-            new_record = continue_path & nonspecular & ~film_passthrough & (~seen_nonspecular | has_film)
-            incoming_fx = mi.Vector3f(frame_x)
-            incoming_fy = mi.Vector3f(frame_y)
-            if new_record:
-                incoming_fx, incoming_fy = self._frame_for(-wo_world)
-            frame_x = dr.select(new_record, incoming_fx, frame_x)
-            frame_y = dr.select(new_record, incoming_fy, frame_y)
-            first_frame_x = dr.select(new_record & ~seen_nonspecular, incoming_fx, first_frame_x)
-            first_frame_y = dr.select(new_record & ~seen_nonspecular, incoming_fy, first_frame_y)
-            first_direction = dr.select(new_record & ~seen_nonspecular, wo_world, first_direction)
-            pending_first = dr.select(new_record, ~seen_nonspecular, pending_first)
-            pending |= new_record
-            chain_distance = dr.select(new_record, 0.0, chain_distance)
-            if has_film:
-                # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
-                is_film = new_record & (kind == int(mat.MaterialKind.THIN_FILM))
-                film_pending = dr.select(new_record, is_film, film_pending)
-                thickness = self.kernels.param(material, mat.FILM_THICKNESS_M)
-                film_separation = dr.select(is_film, frame.n * thickness, film_separation)
-                film_material = dr.select(is_film, material, film_material)
-                film_position = dr.select(is_film, si.p, film_position)
-                film_normal = dr.select(is_film, frame.n, film_normal)
-                film_transmitted = dr.select(is_film, sampled_film_transmitted, film_transmitted)
-                for index in range(film_beams):
-                    film_terms[index] = dr.select(is_film, sampled_film_terms[index], film_terms[index])
-            # Through a perfect mirror / refraction the carried vectors follow the beam.
-            through_specular = continue_path & (specular | film_passthrough) & pending
-            chain_specular = dr.select(new_record, False, chain_specular | through_specular)
-            frame_x = dr.select(through_specular, _reflect_vector(frame_x, frame.n), frame_x)
-            frame_y = dr.select(through_specular, _reflect_vector(frame_y, frame.n), frame_y)
-            film_separation = dr.select(
-                through_specular, _reflect_vector(film_separation, frame.n), film_separation
+            # ---------------------- Update the path; start or carry the pending record -----------
+            path.beta = dr.select(continue_path, path.beta * bs.weight, 0.0)
+            path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
+            self._start_or_carry(
+                vertex, bs, wo_world, continue_path, film_passthrough, record, film, first_vertex
             )
-            seen_nonspecular |= nonspecular
 
-            prev_si = si
-            prev_pdf = pdf
-            prev_delta = delta
-            prev_skip_emission = dr.select(nonspecular, kind == int(mat.MaterialKind.GRATING), False) & ~delta
+            path.prev_si = si
+            path.prev_pdf = bs.pdf
+            path.prev_delta = bs.delta
+            # Emission a NEE-only lobe reaches was counted by next-event estimation already.
+            path.prev_skip_emission = dr.select(nonspecular, nee_only, False) & ~bs.delta
             ray = si.spawn_ray(wo_world)
 
-            # Russian roulette
-            beta_max = dr.max(beta)
-            rr_active = depth >= self.rr_depth
-            rr_probability = dr.minimum(beta_max * dr.square(eta_scale), 0.95)
+            # ---------------------- Russian roulette (on β·η², prb.py) ---------------------------
+            beta_max = dr.max(path.beta)
+            rr_active = path.depth >= self.rr_depth
+            rr_probability = dr.minimum(beta_max * dr.square(path.eta), 0.95)
             survive = sampler.next_1d(continue_path) < rr_probability
-            beta = dr.select(rr_active, beta * dr.rcp(dr.maximum(rr_probability, 1e-6)), beta)
+            path.beta = dr.select(rr_active, path.beta * dr.rcp(dr.maximum(rr_probability, 1e-6)), path.beta)
             active = continue_path & (beta_max > 0.0) & (~rr_active | survive)
-            depth += 1
+            path.depth += 1
 
-        aov_albedo = self.kernels.albedo(aov_material, wavelengths)
         return PathResult(
-            L,
-            d_w,
-            d_mxx,
-            d_mxy,
-            d_myy,
-            d_r,
-            d_c2,
-            d_s2,
-            v_w,
-            v_r,
-            self._camera_coordinates(first_direction),
-            aov_depth,
-            aov_normal,
-            aov_albedo,
+            path.L,
+            sums.weight,
+            sums.moments.m_xx,
+            sums.moments.m_xy,
+            sums.moments.m_yy,
+            sums.moments.r,
+            sums.moments.cos2,
+            sums.moments.sin2,
+            sums.vcz_weight,
+            sums.vcz_r,
+            self._camera_coordinates(first_vertex.direction),
+            aov.depth_m,
+            aov.normal,
+            kernels.albedo(aov.material, wavelengths),
         )
 
 

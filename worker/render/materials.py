@@ -10,9 +10,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Any
 
 import numpy as np
+
+from hgcore.optics.grating import BinaryGrating
+from hgcore.optics.rough_surface import RoughSurface
 
 
 class MaterialKind(IntEnum):
@@ -55,8 +57,20 @@ STRIDE = 23
 # 0: no override; a non-specular vertex is a secondary source sized by the lit patch (docs/physics.md §7).
 DEFAULT_SCATTERING_REGION_RADIUS_M = 0.0
 
-# Materials whose response is a Dirac delta (coherence kept, r accumulated: paper §5, "Perfectly specular").
+# Kind sets: the integrator and the BSDF dispatch (``worker.render.bsdfs``) test kinds only through these.
+#: Materials whose response is a Dirac delta (coherence kept, r accumulated: paper §5, "Perfectly
+#: specular"); a path passes through them without a non-specular vertex.
 SPECULAR_KINDS = frozenset({MaterialKind.MIRROR, MaterialKind.DIELECTRIC})
+#: Interfaces that transmit, whose two sides differ: their shading frame is not flipped towards the
+#: incident side. A thin film transmits too where its record sets ``FILM_TRANSMITS`` (on a dielectric).
+TRANSMITTING_KINDS = frozenset({MaterialKind.DIELECTRIC, MaterialKind.ROUGH_DIELECTRIC})
+#: Materials lit through next-event estimation only (gratings, docs/integrator.md): their lobes are
+#: evaluated towards the emitter's centre with MIS weight 1, and emission their sampled lobes reach is
+#: not counted (it would be counted twice).
+NEE_ONLY_KINDS = frozenset({MaterialKind.GRATING})
+#: Materials whose value depends on the incident coherence through interference (Eq. 18): the path defers
+#: their value until the pending record is resolved.
+INTERFERENCE_KINDS = frozenset({MaterialKind.THIN_FILM})
 
 
 @dataclass
@@ -67,7 +81,7 @@ class MaterialRecord:
 
     kind: MaterialKind
     values: dict[int, float] = field(default_factory=dict)
-    model: Any = None
+    model: RoughSurface | BinaryGrating | None = None
 
     def as_row(self) -> np.ndarray:
         row = np.zeros(STRIDE, dtype=np.float32)

@@ -1,0 +1,223 @@
+"""The interface every material kind implements (``Material``), and what the kinds share.
+
+Conventions (all kinds). Directions are in the local shading frame (z = normal, flipped towards the
+incident side for two-sided materials); ``wi`` points to the previous vertex (towards the camera), ``wo`` to
+the next one (towards the light); by reciprocity the formulas of ``hgcore.optics`` are evaluated with the
+light arriving along ``wo``. ``eval_pdf`` returns f·|cos θo| per wavelength and the hero-wavelength MIS
+density in solid angle — the mean over the four wavelengths of the per-wavelength sampling density, so that
+wavelength-dependent lobes (gratings, PSD lobes) combine without bias (Wilkie et al. 2014, "Hero
+wavelength spectral sampling"). ``sample`` returns a ``MaterialSample``: the weight f·|cos θo|/pdf per
+wavelength, the pdf (1 for a Dirac part), whether the part sampled is a Dirac delta, and the relative index
+η = n_transmitted/n_incident of the sampled event (1 for reflection), which Russian roulette divides out.
+
+Coherence enters only through ``IncidentCoherence`` (Σ⊥, r and frame of the light a vertex receives) and
+``VisibilityModel`` (μ at a separation, Eq. 18), and only for thin films and gratings (Thm 5.1(i)).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, NamedTuple
+
+import drjit as dr
+import mitsuba as mi
+
+from hgcore.optics.coherence import degree_of_coherence
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.fresnel import fresnel_reflectance
+from worker.render import materials as mat
+from worker.render.drjit_ops import drjit_ops
+from worker.render.spectral import lookup
+
+OPS = drjit_ops()
+
+
+@dataclass
+class IncidentCoherence:
+    """Coherence of the light arriving at a vertex: Σ⊥ (m², in frame_x/frame_y ⟂ propagation), r (m)."""
+
+    sigma_xx: mi.Float
+    sigma_xy: mi.Float
+    sigma_yy: mi.Float
+    distance_m: mi.Float
+    frame_x: mi.Vector3f  # world-space unit vectors spanning the transverse plane
+    frame_y: mi.Vector3f
+    rect_source: mi.Bool | bool = False  # True where the source expands like a uniform rectangle (Eq. 14)
+
+
+@dataclass(frozen=True)
+class VisibilityModel:
+    """μ(ξ) of the light a vertex receives (Def. 4.1 / Eq. 18), from the universal expansions of Eq. 14.
+
+    ``disk_coefficients`` / ``rect_coefficients``: (n, m) → ĉ of uniform disks (spheres, disks, scattering
+    regions) and uniform rectangles (rectangles, cylinders seen side-on); ``rect_sources``: whether any
+    emitter of the scene expands like a rectangle (else the rectangle's branch is not compiled).
+    """
+
+    disk_coefficients: dict[tuple[int, int], float]
+    rect_coefficients: dict[tuple[int, int], float]
+    rect_sources: bool
+
+    def at(
+        self, coherence: IncidentCoherence, separation_world: mi.Vector3f, wavelengths: mi.Spectrum
+    ) -> mi.Spectrum:
+        """μ at the transverse part of ``separation_world`` (m) for each wavelength."""
+        xi = (dr.dot(separation_world, coherence.frame_x), dr.dot(separation_world, coherence.frame_y))
+        sigma = (coherence.sigma_xx, coherence.sigma_xy, coherence.sigma_yy)
+        result = mi.Spectrum(0.0)
+        distance = dr.maximum(coherence.distance_m, 1e-9)
+        # With one mode both expansions are the same Gaussian: evaluate the rectangle's only when it differs.
+        needs_rect = self.rect_coefficients != self.disk_coefficients and self.rect_sources
+        for j in range(len(wavelengths)):
+            wavelength_m = wavelengths[j] * 1e-9
+            mu = degree_of_coherence(xi, sigma, distance, wavelength_m, self.disk_coefficients, OPS)
+            if needs_rect:
+                mu_rect = degree_of_coherence(xi, sigma, distance, wavelength_m, self.rect_coefficients, OPS)
+                mu = dr.select(coherence.rect_source, mu_rect, mu)
+            result[j] = mu
+        return result
+
+
+class FilmSample(NamedTuple):
+    """A thin film's partially-coherent terms at the sampled direction (``thin_film.film_terms``): the
+    reflectance terms [R_incoherent, X_1 …], or the transmittance terms where ``transmitted``."""
+
+    terms: list[mi.Spectrum]
+    transmitted: mi.Bool
+
+
+class MaterialSample(NamedTuple):
+    """One sampled scattering event (module docstring); ``film`` only from thin films."""
+
+    wo: mi.Vector3f
+    weight: mi.Spectrum
+    pdf: mi.Float
+    delta: mi.Bool
+    eta: mi.Float
+    film: FilmSample | None = None
+
+
+class MaterialParams:
+    """What a kind's kernels read: the fixed-stride material table (``materials``), the spectra it names
+    and the scene's ``VisibilityModel``."""
+
+    def __init__(
+        self,
+        table: mi.Float,
+        spectra: mi.Float,
+        materials: mat.MaterialTable,
+        visibility: VisibilityModel,
+    ) -> None:
+        self.table = table
+        self.spectra = spectra
+        self.materials = materials
+        #: μ of the incident light, for the kinds that interfere (thin films)
+        self.visibility = visibility
+        #: beams of the partially coherent film sums (the largest of the scene's films, at least two)
+        self.max_beams = max(materials.max_beams(), 2)
+
+    def param(self, material: mi.UInt32, offset: int) -> mi.Float:
+        return dr.gather(mi.Float, self.table, material * mat.STRIDE + offset)
+
+    def spectrum(self, material: mi.UInt32, offset: int, wavelengths: mi.Spectrum) -> mi.Spectrum:
+        spectrum_id = mi.UInt32(self.param(material, offset))
+        return lookup(mi, self.spectra, spectrum_id, wavelengths)
+
+    def kind(self, material: mi.UInt32) -> mi.UInt32:
+        return mi.UInt32(self.param(material, mat.KIND))
+
+    def interface_reflectance(
+        self, material: mi.UInt32, cos_theta: mi.Float | float, wavelengths: mi.Spectrum
+    ) -> mi.Spectrum:
+        """Unpolarised Fresnel reflectance F(θ) of the material's (conductor or substrate) interface."""
+        exterior = self.param(material, mat.EXTERIOR_IOR)
+        eta = self.spectrum(material, mat.ETA_ID, wavelengths) / exterior
+        kappa = self.spectrum(material, mat.KAPPA_ID, wavelengths) / exterior
+        result = mi.Spectrum(0.0)
+        for j in range(len(wavelengths)):
+            result[j] = fresnel_reflectance(cos_theta, ComplexPair(eta[j], kappa[j]), OPS)
+        return result
+
+    def hero_collapse(self, weight: mi.Spectrum, material: mi.UInt32, refracted: mi.Bool) -> mi.Spectrum:
+        """After a refraction through a dispersive medium only the hero wavelength's path is valid: its
+        weight gains the factor 4 (its share of the four-wavelength pdf), the others are zeroed. Once per
+        path: callers pass ``refracted & ~collapsed`` (a second factor 4 would bias the estimate 4×)."""
+        collapse = refracted & (self.param(material, mat.DISPERSIVE) > 0.5)
+        result = mi.Spectrum(weight)
+        result[0] = dr.select(collapse, weight[0] * len(result), weight[0])
+        for j in range(1, len(result)):
+            result[j] = dr.select(collapse, 0.0, weight[j])
+        return result
+
+
+class ShadingPoint(NamedTuple):
+    """A vertex as a material sees it (the part of Mitsuba's SurfaceInteraction a BSDF reads): the
+    material index, ``wi`` (local frame, towards the previous vertex), the path's wavelengths (nm), the
+    world-space shading frame (gratings' axes, a film's normal; sampling does not need it) and whether the
+    path already carries its hero wavelength only (``MaterialParams.hero_collapse``)."""
+
+    material: mi.UInt32
+    wi: mi.Vector3f
+    wavelengths: mi.Spectrum
+    frame: mi.Frame3f | None = None
+    collapsed: mi.Bool | bool = False
+
+
+class Material:
+    """The kernels of one material kind (one module per kind in this package).
+
+    A *table* kind (``per_material = False``: diffuse, mirror, smooth dielectric) reads everything from the
+    material table and compiles one branch for all its materials; a *model* kind (rough conductor, rough
+    dielectric, thin film, grating) compiles one branch per material with the constants of its optics
+    model (``model``, the record's ``MaterialRecord.model``) built in. ``MaterialKernels`` (``dispatch``)
+    selects the branch of each lane with ``selects``.
+    """
+
+    kind: ClassVar[mat.MaterialKind]
+    per_material: ClassVar[bool] = False
+
+    def __init__(self, params: MaterialParams, index: int | None = None) -> None:
+        self.params = params
+        self.index = index  # the material's table index (model kinds only)
+        self.model = None if index is None else params.materials.records[index].model
+
+    @property
+    def record(self) -> mat.MaterialRecord:
+        assert self.index is not None, "table kinds have no single record"
+        return self.params.materials.records[self.index]
+
+    def selects(self, material: mi.UInt32, kind: mi.UInt32) -> mi.Bool:
+        """Lanes whose material this branch handles."""
+        if self.per_material:
+            return material == self.index
+        return kind == int(self.kind)
+
+    def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
+        """Lanes this kind samples: reflectors only from their front side."""
+        return active & (wi.z > 0)
+
+    def eval_domain(self, wi: mi.Vector3f, wo: mi.Vector3f, active: mi.Bool) -> mi.Bool:
+        """Lanes where ``eval_pdf`` applies: reflectors with both directions in front."""
+        return active & (wi.z > 0) & (wo.z > 0)
+
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
+        """Sample the next direction from ``point`` with the uniforms ``sample1``, ``sample2``."""
+        raise NotImplementedError
+
+    def eval_pdf(
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
+    ) -> tuple[mi.Spectrum, mi.Float] | None:
+        """(f·|cos θo|, hero-MIS pdf) of the non-Dirac part for light arriving along ``wo`` with the
+        coherence ``coherence``; ``None`` for a purely Dirac kind. ``wo_phase``: the direction whose
+        interference phase a thin film uses (module ``thin_film``)."""
+        return None
+
+
+def refract(wi: mi.Vector3f, eta_ti: mi.Float, cos_t: mi.Float) -> mi.Vector3f:
+    """Snell refraction of ``wi`` (local frame) with relative index η_ti = n_t/n_i and |cos θ_t|."""
+    return mi.Vector3f(-wi.x / eta_ti, -wi.y / eta_ti, -dr.mulsign(cos_t, wi.z))
+
+
+def vec(v: mi.Vector3f) -> tuple[mi.Float, mi.Float, mi.Float]:
+    """A vector as the component tuple the ``hgcore.optics`` formulas take."""
+    return (v.x, v.y, v.z)

@@ -1,0 +1,164 @@
+"""``MaterialKernels``: one branch per material kind present in the scene, selected per lane.
+
+Table kinds (diffuse, mirror, smooth dielectric) compile one branch each; model kinds (rough conductor,
+rough dielectric, thin film, grating) one branch per material (``common.Material``). Kinds are tested only
+through the kind sets of ``worker.render.materials`` (``SPECULAR_KINDS`` …) and only for the kinds present,
+so a scene's kernel carries the branches it can take and no others.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from worker.render import materials as mat
+from worker.render.bsdfs.common import (
+    FilmSample,
+    IncidentCoherence,
+    Material,
+    MaterialParams,
+    MaterialSample,
+    ShadingPoint,
+)
+from worker.render.bsdfs.dielectric import Dielectric
+from worker.render.bsdfs.diffuse import Diffuse
+from worker.render.bsdfs.grating import Grating
+from worker.render.bsdfs.mirror import Mirror
+from worker.render.bsdfs.rough_conductor import RoughConductor
+from worker.render.bsdfs.rough_dielectric import RoughDielectric
+from worker.render.bsdfs.thin_film import ThinFilm, film_terms
+
+#: The implementation of each kind (``BLACK``, the emitters' surfaces, absorbs: no branch).
+MATERIAL_CLASSES: dict[mat.MaterialKind, type[Material]] = {
+    cls.kind: cls for cls in (Diffuse, Mirror, Dielectric, RoughConductor, RoughDielectric, ThinFilm, Grating)
+}
+
+
+class MaterialKernels:
+    """Gathers material parameters and dispatches to the kernels of the kinds present in the scene."""
+
+    def __init__(self, params: MaterialParams) -> None:
+        self.params = params
+        materials = params.materials
+        self.materials = materials
+        self.kinds = materials.kinds
+        self.max_beams = params.max_beams
+        self.visibility = params.visibility
+        self.branches: list[Material] = []
+        for kind in sorted(self.kinds & MATERIAL_CLASSES.keys()):
+            cls = MATERIAL_CLASSES[kind]
+            if cls.per_material:
+                self.branches += [cls(self.params, index) for index in materials.indices_of(kind)]
+            else:
+                self.branches.append(cls(self.params))
+
+    # ---------------------------------------------------------------- parameters and kinds
+    def param(self, material: mi.UInt32, offset: int) -> mi.Float:
+        return self.params.param(material, offset)
+
+    def kind(self, material: mi.UInt32) -> mi.UInt32:
+        return self.params.kind(material)
+
+    def has(self, kinds: frozenset[mat.MaterialKind]) -> bool:
+        """Whether the scene has a material of one of ``kinds`` (decided when the kernel is traced)."""
+        return bool(self.kinds & kinds)
+
+    def is_kind(self, kind: mi.UInt32, kinds: frozenset[mat.MaterialKind]) -> mi.Bool:
+        """Lanes whose material ``kind`` is one of ``kinds`` (only the kinds present are tested)."""
+        result = mi.Bool(False)
+        for member in sorted(self.kinds & kinds):
+            result |= kind == int(member)
+        return result
+
+    def is_specular(self, material: mi.UInt32) -> mi.Bool:
+        """Dirac materials (``materials.SPECULAR_KINDS``)."""
+        return self.is_kind(self.kind(material), mat.SPECULAR_KINDS)
+
+    def two_sided(self, material: mi.UInt32) -> mi.Bool:
+        """Whether the shading frame is flipped towards the incident side: not for interfaces that
+        transmit (``materials.TRANSMITTING_KINDS``, films on a dielectric), whose sides differ."""
+        kind = self.kind(material)
+        transmits = self.is_kind(kind, mat.TRANSMITTING_KINDS)
+        if mat.MaterialKind.THIN_FILM in self.kinds:
+            film = kind == int(mat.MaterialKind.THIN_FILM)
+            transmits |= film & (self.param(material, mat.FILM_TRANSMITS) > 0.5)
+        return ~transmits
+
+    def albedo(self, material: mi.UInt32, wavelengths: mi.Spectrum) -> mi.Spectrum:
+        """Directional-hemispherical reflectance at normal incidence, for the albedo AOV."""
+        kind = self.kind(material)
+        diffuse = self.is_kind(kind, frozenset({mat.MaterialKind.DIFFUSE}))
+        reflective = ~diffuse & ~self.is_kind(kind, frozenset({mat.MaterialKind.BLACK}))
+        value = dr.select(diffuse, self.params.spectrum(material, mat.REFLECTANCE_ID, wavelengths), 0.0)
+        return dr.select(reflective, self.params.interface_reflectance(material, 1.0, wavelengths), value)
+
+    def film_terms(self, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum) -> list[mi.Spectrum]:
+        """A thin film's terms [R_incoherent, X_1 …] at incidence cos_i (``thin_film.film_terms``)."""
+        return film_terms(self.params, material, cos_i, wavelengths)
+
+    # ---------------------------------------------------------------- evaluation and sampling
+    def eval_pdf(
+        self,
+        material: mi.UInt32,
+        wi: mi.Vector3f,
+        wo: mi.Vector3f,
+        wavelengths: mi.Spectrum,
+        coherence: IncidentCoherence,
+        frame: mi.Frame3f,
+        active: mi.Bool,
+        wo_phase: mi.Vector3f | None = None,
+    ) -> tuple[mi.Spectrum, mi.Float]:
+        """(f·|cos θo| per wavelength, hero-MIS pdf) of the non-Dirac part for light arriving along ``wo``.
+
+        ``frame``: the shading frame (world space); ``wo_phase`` (default ``wo``): the direction whose
+        interference phase a thin film uses — for light from an emitter the direction to its centre (BRIEF:
+        sampled emitter points serve radiometry only).
+        """
+        kind = self.kind(material)
+        point = ShadingPoint(material, wi, wavelengths, frame)
+        phase = wo if wo_phase is None else wo_phase
+        value = mi.Spectrum(0.0)
+        pdf = mi.Float(0.0)
+        for branch in self.branches:
+            evaluated = branch.eval_pdf(point, wo, coherence, phase)
+            if evaluated is None:  # a Dirac kind: nothing to evaluate
+                continue
+            is_this = branch.eval_domain(wi, wo, active) & branch.selects(material, kind)
+            value = dr.select(is_this, evaluated[0], value)
+            pdf = dr.select(is_this, evaluated[1], pdf)
+        return value, pdf
+
+    def sample(
+        self,
+        material: mi.UInt32,
+        wi: mi.Vector3f,
+        wavelengths: mi.Spectrum,
+        sample1: mi.Float,
+        sample2: mi.Point2f,
+        active: mi.Bool,
+        collapsed: mi.Bool | bool = False,
+    ) -> MaterialSample:
+        """The next path segment (``common.MaterialSample``); ``film`` holds the thin films' terms (zero
+        elsewhere) — the weight uses their incoherent part, the integrator rescales it once the incident
+        coherence is known. ``collapsed``: the path already refracted through a dispersive medium and
+        carries its hero wavelength only."""
+        kind = self.kind(material)
+        point = ShadingPoint(material, wi, wavelengths, None, mi.Bool(collapsed))
+        wo, weight, pdf = mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Float(0.0)
+        delta, eta = mi.Bool(False), mi.Float(1.0)
+        terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
+        transmitted = mi.Bool(False)
+        for branch in self.branches:
+            is_this = branch.sample_domain(wi, active) & branch.selects(material, kind)
+            sampled = branch.sample(point, sample1, sample2)
+            wo = dr.select(is_this, sampled.wo, wo)
+            weight = dr.select(is_this, sampled.weight, weight)
+            pdf = dr.select(is_this, sampled.pdf, pdf)
+            delta = dr.select(is_this, sampled.delta, delta)
+            eta = dr.select(is_this, sampled.eta, eta)
+            if sampled.film is not None:
+                transmitted = dr.select(is_this, sampled.film.transmitted, transmitted)
+                for slot, term in enumerate(sampled.film.terms):
+                    terms[slot] = dr.select(is_this, term, terms[slot])
+        weight = dr.select(active, weight, 0.0)
+        return MaterialSample(wo, weight, pdf, delta, eta, FilmSample(terms, transmitted))

@@ -1,0 +1,17 @@
+"""Perfect mirror (Dirac): reflects with the Fresnel reflectance of its conductor (Ag, Au, Cu, Al) or 1."""
+
+from __future__ import annotations
+
+import mitsuba as mi
+
+from worker.render import materials as mat
+from worker.render.bsdfs.common import Material, MaterialSample, ShadingPoint
+
+
+class Mirror(Material):
+    kind = mat.MaterialKind.MIRROR
+
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
+        wi = point.wi
+        reflectance = self.params.interface_reflectance(point.material, wi.z, point.wavelengths)
+        return MaterialSample(mi.reflect(wi), reflectance, mi.Float(1.0), mi.Bool(True), mi.Float(1.0))

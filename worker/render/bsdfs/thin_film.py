@@ -1,0 +1,165 @@
+"""Thin film (Eq. 18) on a rough conductor or dielectric substrate.
+
+The film is the rough interface of Eq. 15 (``rough_conductor``: specular part and lobe) whose reflectance
+is the P-beam partially coherent sum R(V) = R_incoherent + Σ_d V_d·X_d, V_d = μ(d·τ·n̂) the visibility of
+the incident light at the d-th beam's shear (``VisibilityModel``). Sampling uses the incoherent part
+R_incoherent and returns the terms (``FilmSample``); the integrator rescales the throughput by
+R(V)/R_incoherent once the path has reached the light's source and its coherence is known.
+
+The interference phase is taken along ``wo_phase``: towards the emitter's centre for light from an emitter
+(BRIEF: sampled emitter points serve radiometry only), else the sampled direction. On a dielectric
+substrate the film also transmits T(V) = 1 − R(V), specularly, into and out of the substrate.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from hgcore.optics.complex_pair import ComplexPair
+from hgcore.optics.fresnel import fresnel_dielectric
+from hgcore.optics.thin_film import (
+    combine_reflectance_terms,
+    film_amplitudes,
+    reflectance_terms,
+    transmission_terms,
+)
+from worker.render import materials as mat
+from worker.render.bsdfs.common import (
+    OPS,
+    FilmSample,
+    IncidentCoherence,
+    MaterialParams,
+    MaterialSample,
+    ShadingPoint,
+    VisibilityModel,
+    refract,
+)
+from worker.render.bsdfs.rough_conductor import RoughConductor
+
+
+def film_terms(
+    params: MaterialParams, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum
+) -> list[mi.Spectrum]:
+    """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i."""
+    exterior = params.param(material, mat.EXTERIOR_IOR)
+    thickness_m = params.param(material, mat.FILM_THICKNESS_M)
+    film_ior = params.spectrum(material, mat.FILM_IOR_ID, wavelengths)
+    substrate_n = params.spectrum(material, mat.ETA_ID, wavelengths)
+    substrate_k = params.spectrum(material, mat.KAPPA_ID, wavelengths)
+    terms = [mi.Spectrum(0.0) for _ in range(params.max_beams)]
+    for j in range(len(wavelengths)):
+        amplitudes = film_amplitudes(
+            cos_i,
+            wavelengths[j] * 1e-9,
+            thickness_m,
+            film_ior[j],
+            ComplexPair(substrate_n[j], substrate_k[j]),
+            exterior,
+            params.max_beams,
+            OPS,
+        )
+        for slot, term in enumerate(reflectance_terms(amplitudes)):
+            terms[slot][j] = term
+    return terms
+
+
+def film_reflectance(
+    terms: list[mi.Spectrum],
+    visibility: VisibilityModel,
+    coherence: IncidentCoherence,
+    separation_world: mi.Vector3f,
+    wavelengths: mi.Spectrum,
+) -> mi.Spectrum:
+    """R(V) of the partially coherent multi-beam sum (Eq. 18 for P = 2), V_d = μ(d·``separation_world``)
+    of the light described by ``coherence``; ``separation_world`` is τ·n̂ (m) between the interfaces."""
+    visibilities = [
+        visibility.at(coherence, separation_world * separation, wavelengths)
+        for separation in range(1, len(terms))
+    ]
+    return dr.maximum(combine_reflectance_terms(terms, visibilities), 0.0)
+
+
+class ThinFilm(RoughConductor):
+    kind = mat.MaterialKind.THIN_FILM
+    per_material = True
+
+    @property
+    def transmits(self) -> bool:
+        """On a dielectric substrate: reflects and transmits (one-sided like glass)."""
+        return self.record.values.get(mat.FILM_TRANSMITS, 0.0) > 0.5
+
+    def reflectance(self, point: ShadingPoint, wo: mi.Vector3f) -> list[mi.Spectrum]:
+        """The film's terms at the sampled direction (R_incoherent first)."""
+        return film_terms(self.params, point.material, wo.z, point.wavelengths)
+
+    def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
+        return active & (wi.z != 0) if self.transmits else active & (wi.z > 0)
+
+    def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
+        if self.transmits:
+            return self._sample_on_dielectric(point, sample1, sample2)
+        sampled, terms = self.sample_reflection(point, sample1, sample2)
+        return sampled._replace(film=FilmSample(terms, mi.Bool(False)))
+
+    def eval_pdf(
+        self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
+    ) -> tuple[mi.Spectrum, mi.Float]:
+        terms = film_terms(self.params, point.material, wo_phase.z, point.wavelengths)
+        thickness_m = self.params.param(point.material, mat.FILM_THICKNESS_M)
+        separation = point.frame.n * thickness_m
+        reflectance = film_reflectance(
+            terms, self.params.visibility, coherence, separation, point.wavelengths
+        )
+        return self.lobe_eval(point, wo, reflectance)
+
+    def _sample_on_dielectric(
+        self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f
+    ) -> MaterialSample:
+        """A film on a dielectric substrate reflects with R(V) and transmits T(V) = 1 − R(V)
+        (``thin_film.transmission_terms``).
+
+        From the exterior (wi.z > 0) reflect with probability R_incoherent(λ_hero), as the rough film does
+        (specular part and Eq. 15 lobe), else refract specularly into the substrate; from the substrate
+        the exterior-side angle follows from n_s sin θ_s = n_0 sin θ_0 through the stack (beyond the
+        critical angle all light is reflected) and reflection and transmission are specular. A lossless
+        stack has the same R from both sides (exact in the coherent and incoherent limits), so the
+        exterior-side terms serve both. The film's roughness scatters reflected light only.
+        """
+        params, material, wi, wavelengths = self.params, point.material, point.wi, point.wavelengths
+        exterior = params.param(material, mat.EXTERIOR_IOR)
+        eta = params.spectrum(material, mat.ETA_ID, wavelengths)[0] / exterior
+        outside = wi.z > 0
+        eta_ti = dr.select(outside, eta, dr.rcp(eta))  # n_transmitted / n_incident (hero)
+        _, cos_t = fresnel_dielectric(wi.z, eta_ti, OPS)
+        cos_i = dr.abs(wi.z)
+        total_internal = ~outside & (dr.square(eta_ti) < 1.0 - dr.square(cos_i))
+        cos_exterior = dr.select(outside, cos_i, cos_t)
+        terms = film_terms(params, material, cos_exterior, wavelengths)
+        reflectance = dr.select(total_internal, 1.0, terms[0])
+        reflect_probability = reflectance[0]
+        reflect = sample1 < reflect_probability
+        # exterior reflection: the rough film's own sampling with the remaining uniform
+        u_reflect = dr.clip(sample1 / dr.maximum(reflect_probability, 1e-12), 0.0, 0.999999)
+        lobe, lobe_terms = self.sample_reflection(point, u_reflect, sample2)
+        r_weight = lobe.weight / dr.maximum(reflect_probability, 1e-12)
+        # substrate-side reflection: specular, R/R_hero
+        inner_weight = reflectance / dr.maximum(reflect_probability, 1e-12)
+        # transmission: specular refraction with T/T_hero and the radiance factor (n_camera/n_light)²
+        transmittance = 1.0 - reflectance
+        t_weight = transmittance / dr.maximum(1.0 - reflect_probability, 1e-12) * dr.square(dr.rcp(eta_ti))
+        t_weight = params.hero_collapse(t_weight, material, ~point.collapsed)
+        wo = dr.select(reflect, dr.select(outside, lobe.wo, mi.reflect(wi)), refract(wi, eta_ti, cos_t))
+        weight = dr.select(reflect, dr.select(outside, r_weight, inner_weight), t_weight)
+        pdf = dr.select(reflect & outside, lobe.pdf, 1.0)
+        delta = dr.select(reflect & outside, lobe.delta, True)
+        no_interference = [mi.Spectrum(1.0 if slot == 0 else 0.0) for slot in range(len(terms))]
+        inner_terms = [dr.select(total_internal, a, b) for a, b in zip(no_interference, terms, strict=True)]
+        reflected_terms = [dr.select(outside, a, b) for a, b in zip(lobe_terms, inner_terms, strict=True)]
+        transmitted = ~reflect
+        chosen = [
+            dr.select(transmitted, a, b)
+            for a, b in zip(transmission_terms(terms), reflected_terms, strict=True)
+        ]
+        eta_sampled = dr.select(transmitted, eta_ti, 1.0)
+        return MaterialSample(wo, weight, pdf, delta, eta_sampled, FilmSample(chosen, transmitted))
