@@ -13,24 +13,25 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "bench" / "results" / "gpu_check.json"
+
+
+def run_gpu_check(path_prefix: Path | None = None) -> dict:
+    """bench/gpu_check.sh's JSON output; it must exit 0 and leave the results file as it was."""
+    before = RESULTS.read_bytes() if RESULTS.exists() else None
+    env = {**os.environ, "PYTHON": sys.executable}
+    if path_prefix is not None:
+        env["PATH"] = f"{path_prefix}:{env['PATH']}"
+    command = [str(ROOT / "bench" / "gpu_check.sh")]
+    done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    assert (RESULTS.read_bytes() if RESULTS.exists() else None) == before
+    return json.loads(done.stdout)
 
 
 @pytest.mark.skipif(shutil.which("nvidia-smi") is not None, reason="this machine has nvidia-smi")
-def test_gpu_check_without_a_gpu_skips_and_exits_0(tmp_path: Path) -> None:
-    results = ROOT / "bench" / "results" / "gpu_check.json"
-    before = results.read_bytes() if results.exists() else None
-    env = {**os.environ, "PYTHON": sys.executable}
-    done = subprocess.run(
-        [str(ROOT / "bench" / "gpu_check.sh")],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=120,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout) == {"gpu": None, "skipped": "nvidia-smi not found"}
-    assert (results.read_bytes() if results.exists() else None) == before
+def test_gpu_check_without_a_gpu_skips_and_exits_0() -> None:
+    assert run_gpu_check() == {"gpu": None, "skipped": "nvidia-smi not found"}
 
 
 def test_gpu_check_with_a_gpu_listing_none_skips(tmp_path: Path) -> None:
@@ -38,14 +39,4 @@ def test_gpu_check_with_a_gpu_listing_none_skips(tmp_path: Path) -> None:
     fake = tmp_path / "nvidia-smi"
     fake.write_text("#!/bin/sh\necho 'No devices were found'\nexit 6\n")
     fake.chmod(0o755)
-    env = {**os.environ, "PYTHON": sys.executable, "PATH": f"{tmp_path}:{os.environ['PATH']}"}
-    done = subprocess.run(
-        [str(ROOT / "bench" / "gpu_check.sh")],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=120,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout) == {"gpu": None, "skipped": "nvidia-smi lists no GPU"}
+    assert run_gpu_check(tmp_path) == {"gpu": None, "skipped": "nvidia-smi lists no GPU"}

@@ -14,21 +14,13 @@ from hgcore.artifacts.layout import LUMINANCE_VARIANCE
 from hgcore.colour import y_bar_integral_nm
 from hgcore.errors import InputError
 from hgcore.noise_target import NoiseTarget, next_round_spp
-from tests.integrator.scenes import plane_under_source
+from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
 from worker.render.api import ChunkSpec, as_scene, chunk_seed, render_scene, render_to_dir
-
-SOURCE = {
-    "type": "sphere",
-    "center_m": [0.0, 0.3, 1.0],
-    "radius_m": 0.2,
-    "spectrum": {"type": "d65"},
-    "power_w": 50.0,
-}
 
 
 @pytest.fixture(scope="module")
 def scene() -> dict:
-    return plane_under_source(SOURCE, size_px=16, spp=2)
+    return plane_under_source(D65_SPHERE_SOURCE, size_px=16, spp=2)
 
 
 def band_mean_rel_errors(out_dir: Path) -> np.ndarray:

@@ -20,17 +20,9 @@ from hgcore.artifacts.pixel_sums import (
     read_partial,
     write_partial,
 )
-from tests.integrator.scenes import plane_under_source
+from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
 from worker.render.api import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
 from worker.render.renderer import tile_rows
-
-SPHERE = {
-    "type": "sphere",
-    "center_m": [0.0, 0.3, 1.0],
-    "radius_m": 0.2,
-    "spectrum": {"type": "d65"},
-    "power_w": 50.0,
-}
 
 
 def all_channels(out_dir: Path) -> dict[str, np.ndarray]:
@@ -54,7 +46,7 @@ def small_tiles(monkeypatch: pytest.MonkeyPatch) -> int:
 
 @pytest.fixture
 def scene() -> dict:
-    return plane_under_source(SPHERE, size_px=20, spp=6)
+    return plane_under_source(D65_SPHERE_SOURCE, size_px=20, spp=6)
 
 
 def test_tile_plan_covers_the_image_in_row_bands(scene: dict, small_tiles: int) -> None:
