@@ -40,8 +40,11 @@ def test_band_mean_target_is_met_by_the_written_image_and_rounds_are_determinist
     scene: dict, tmp_path: Path
 ) -> None:
     target = NoiseTarget(rel_error=0.01)
-    summary = render_scene(scene, tmp_path / "a", target=target)
+    reported: list[float] = []
+    summary = render_scene(scene, tmp_path / "a", target=target, progress=reported.append)
     block = summary["noise_target"]
+    # Progress never goes back when a round is added, and stays within [0, 1].
+    assert reported == sorted(reported) and reported[0] > 0 and reported[-1] <= 1.0
     assert block["met"] and block["stop_reason"] == "target_met"
     assert block["achieved_rel_error"] <= 0.01
     assert len(block["rounds"]) >= 2 and summary["spp"] == block["spp"] > 2

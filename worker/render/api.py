@@ -86,10 +86,12 @@ def film_bands(scene: Scene) -> BandLayout:
 
 
 class _Progress:
-    """Progress of a render over ``total`` units (samples) reported as a fraction in [0, 1]."""
+    """Progress of a render over ``total`` units (samples) reported as a fraction in [0, 1], never
+    decreasing (a noise-target render raises ``total`` when it plans another round)."""
 
     def __init__(self, callback: ProgressCallback | None, total: float) -> None:
         self.callback, self.total, self.done = callback, max(total, 1.0), 0.0
+        self.reported = 0.0
 
     def part(self, units: float) -> ProgressCallback:
         """A callback for a part of ``units`` units, starting where the parts before it ended."""
@@ -97,8 +99,9 @@ class _Progress:
         self.done += units
 
         def report(fraction: float) -> None:
+            self.reported = max(self.reported, min(1.0, (start + fraction * units) / self.total))
             if self.callback is not None:
-                self.callback(min(1.0, (start + fraction * units) / self.total))
+                self.callback(self.reported)
 
         return report
 
