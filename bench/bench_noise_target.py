@@ -1,11 +1,12 @@
 """Noise-target rendering against an oracle fixed spp (issue 16, item 4; goal: samples ≤ 1.2× oracle).
 
-For each scene (the Cornell box and a thin-film example, ``RESOLUTION_PX``², ``BANDS`` bands, max depth 8,
-``llvm_ad_spectral``) and each seed: a noise-target render (``render_scene(..., target=...)``, first round
-``FIRST_SPP``) to the band-mean target ``TARGET`` and to the per-pixel luminance target ``QUANTILE_TARGET``
-at the median pixel; then the oracle: the fixed spp that just meets the same target, N* = ⌈N·(e/E)²⌉
-from the target render's final N and error e (error ∝ 1/√N; the final estimate is the most precise one
-available), rendered as one fixed render whose achieved error and wall time are recorded too.
+For each scene (the Cornell box and a thin-film example, ``RESOLUTION_PX``², ``BANDS`` bands, max
+depth 8, ``llvm_ad_spectral``) and each seed: a noise-target render (``render_scene(..., target=...)``,
+first round ``FIRST_SPP``, bounded by ``TIME_BUDGET_S``) to the band-mean target ``TARGETS[scene]`` and
+to the per-pixel luminance target ``QUANTILE_TARGET`` at the median pixel; then the oracle: the fixed
+spp that just meets the same target, N* = ⌈N·(e/E)²⌉ from the target render's final N and error e
+(error ∝ 1/√N; the final estimate is the most precise one available), rendered as one fixed render
+whose achieved error and wall time are recorded too.
 Reported: samples ratio N/N*, wall-time ratio (target render / fixed render at N*), the rounds, and the
 fixed render's error (it should be close to E: a check of the oracle). Kernels are compiled by a warm-up
 render first (not timed). The fixed render runs through the same code path (a target its first round
@@ -33,7 +34,10 @@ SCENES = ("cornell_box", "thin_film_sphere_light")
 RESOLUTION_PX = 64
 BANDS = 8
 FIRST_SPP = 4
-TARGET = 0.01
+TARGETS = {"cornell_box": 0.01, "thin_film_sphere_light": 0.03}
+"""Band-mean targets: the F11-lit thin film is far noisier per sample (spiky spectrum, issue item 5)."""
+TIME_BUDGET_S = 120.0
+"""Bounds each target render (the bench stays short); a run that hits it reports met = false."""
 QUANTILE = 0.5
 QUANTILE_TARGET = 0.1
 GOAL_RATIO = 1.2
@@ -51,7 +55,7 @@ def one(name: str, seed: int, rel_error: float, quantile: float | None) -> dict[
     from hgcore.noise_target import NoiseTarget
     from worker.render.api import render_scene
 
-    target = NoiseTarget(rel_error=rel_error, quantile=quantile)
+    target = NoiseTarget(rel_error=rel_error, quantile=quantile, time_budget_s=TIME_BUDGET_S)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         summary = render_scene(scene_of(name, FIRST_SPP, seed), Path(tmp) / "target", target=target)
@@ -74,6 +78,7 @@ def one(name: str, seed: int, rel_error: float, quantile: float | None) -> dict[
         "target_rel_error": rel_error,
         "spp": spp,
         "achieved_rel_error": block["achieved_rel_error"],
+        "met": block["met"],
         "rounds": block["rounds"],
         "target_wall_s": target_s,
         "oracle_spp": oracle_spp,
@@ -86,7 +91,7 @@ def one(name: str, seed: int, rel_error: float, quantile: float | None) -> dict[
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1])
     args = parser.parse_args(argv)
     os.environ.setdefault("HGRENDER_VARIANT", "llvm_ad_spectral")
     from worker.render.api import render_scene
@@ -98,7 +103,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     runs = []
     for name in SCENES:
         for seed in args.seeds:
-            for rel_error, quantile in ((TARGET, None), (QUANTILE_TARGET, QUANTILE)):
+            for rel_error, quantile in ((TARGETS[name], None), (QUANTILE_TARGET, QUANTILE)):
                 runs.append(one(name, seed, rel_error, quantile))
                 print(json.dumps({k: v for k, v in runs[-1].items() if k != "rounds"}), file=sys.stderr)
     results = {
