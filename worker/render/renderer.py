@@ -206,19 +206,17 @@ class Renderer:
         width, height = self.width, self.height
         wavefront = width * (y1 - y0) * spp
         index = dr.arange(mi.UInt32, wavefront)
-        # Opaque: as literals, the tile's first pixel, the image size and the pass's spp would be part of
-        # the kernel's IR, and every tile, image size and spp (noise-target rounds) would compile its own
-        # copy of the path megakernel (~1 s each). Dr.Jit divides by a scalar as a product with its
-        # reciprocal, so the reciprocals are passed (the same float32 values, the same products).
-        spp_value, width_value = dr.opaque(mi.UInt32, spp), dr.opaque(mi.UInt32, width)
-        pixel = index // spp_value + dr.opaque(mi.UInt32, y0 * width)
+        # Opaque: as a literal the tile's first pixel would be part of the kernel's IR, and every tile
+        # would compile its own copy of the path megakernel. The pass's spp and the image size stay
+        # literals: divisions by them compile to multiply-shift sequences, while opaque divisors made the
+        # megakernel ~5 % slower (bench_compare, Cornell 128²); a new spp per pass compiles once (~0.3 s).
+        pixel = index // spp + dr.opaque(mi.UInt32, y0 * width)
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, wavefront)
-        pixel_x = mi.Float(pixel % width_value)
-        pixel_y = mi.Float(pixel // width_value)
+        pixel_x = mi.Float(pixel % width)
+        pixel_y = mi.Float(pixel // width)
         film_position = mi.Point2f(
-            (pixel_x + sampler.next_1d()) * dr.opaque(mi.Float, 1.0 / width),
-            (pixel_y + sampler.next_1d()) * dr.opaque(mi.Float, 1.0 / height),
+            (pixel_x + sampler.next_1d()) / width, (pixel_y + sampler.next_1d()) / height
         )
         ray, _ = self.sensor.sample_ray(0.0, sampler.next_1d(), film_position, sampler.next_2d())
         span = bands.wavelength_max_nm - bands.wavelength_min_nm
