@@ -9,6 +9,7 @@ Compare figures across runs only where it is similar; compare versions within on
 from __future__ import annotations
 
 import json
+import os
 import platform
 import time
 from pathlib import Path
@@ -48,3 +49,20 @@ def write_results(name: str, results: dict[str, Any]) -> Path:
     path = RESULTS_DIR / f"{name}.json"
     atomic_write_bytes(path, (json.dumps(results, indent=2) + "\n").encode())
     return path
+
+
+class MachineLoad:
+    """The machine's speed and load around a benchmark: ``cpu_reference_s`` and the load average when
+    created (before) and when ``fields`` is called (after), with the CPU model and count."""
+
+    def __init__(self) -> None:
+        self.reference_before_s = cpu_reference_s()
+        self.load_before = os.getloadavg()
+
+    def fields(self) -> dict[str, Any]:
+        return {
+            "cpu_model": cpu_model(),
+            "cpu_count": os.cpu_count(),
+            "cpu_reference_s": {"before": self.reference_before_s, "after": cpu_reference_s()},
+            "loadavg": {"before": self.load_before, "after": os.getloadavg()},
+        }

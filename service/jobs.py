@@ -37,6 +37,7 @@ from hgcore.jobs.queue_graph import PRIORITY_QUEUES, enqueue_job_graph, rq_ids
 from hgcore.jobs.records import JobNotFoundError, JobRecords, decode_hash
 from hgcore.jobs.status import TERMINAL_STATUSES, JobStatus, Priority
 from hgcore.jobs.views import JobView, build_view
+from hgcore.noise_target import NoiseTarget
 from hgcore.settings import Settings
 from hgcore.store.base import ArtifactStore
 
@@ -65,8 +66,13 @@ class JobService(JobRecords):
 
     # ---- creation -------------------------------------------------------------------------------------
 
-    def plan(self, spp: int, chunks: int | None) -> int:
-        """Number of chunks for a request: the request's, else the default, never more than spp."""
+    def plan(self, spp: int, chunks: int | None, noise_target: NoiseTarget | None = None) -> int:
+        """Number of chunks for a request: the request's, else the default, never more than spp. A
+        noise-target job is one chunk: its horse adds passes until the target is met."""
+        if noise_target is not None:
+            if chunks is not None and chunks > 1:
+                raise InputError("chunks: a job with a noise target renders as one chunk")
+            return 1
         chunk_count = chunks if chunks is not None else self.settings.default_chunks
         if chunk_count > self.settings.max_chunks:
             raise InputError(f"chunks: {chunk_count} exceeds the limit of {self.settings.max_chunks}")
@@ -79,6 +85,7 @@ class JobService(JobRecords):
         *,
         priority: Priority = "normal",
         chunks: int | None = None,
+        noise_target: NoiseTarget | None = None,
         idempotency_key: str | None = None,
         name: str | None = None,
         extra_files: Mapping[str, bytes] | None = None,
@@ -88,12 +95,13 @@ class JobService(JobRecords):
 
         Returns (job, created); ``created`` is False when ``idempotency_key`` named an earlier job.
         ``extra_files`` (relative names → bytes) are stored next to the scene (textures of a USD bundle).
+        ``noise_target``: render until it is met (``hgcore.noise_target``), as one chunk.
         """
         if priority not in PRIORITY_QUEUES:
             raise InputError(f"priority: must be one of {list(PRIORITY_QUEUES)}")
         spp = int(scene["film"]["spp"])
         base_seed = int(scene["film"].get("seed", 0))
-        chunk_count = self.plan(spp, chunks)
+        chunk_count = self.plan(spp, chunks, noise_target)
         job_id = uuid.uuid4().hex
         if idempotency_key is not None:
             earlier = self._claim_idempotency_key(owner, idempotency_key, job_id)
@@ -113,6 +121,7 @@ class JobService(JobRecords):
             "height": str(scene["film"].get("height", "")),
             "seed": str(base_seed),
             "chunks": str(chunk_count),
+            **(noise_target.record_fields() if noise_target is not None else {}),
             "created_at": repr(now),
             "started_at": "",
             "finished_at": "",

@@ -27,6 +27,28 @@ class JobOptions(BaseModel):
     spp: int | None = Field(None, ge=1, description="Samples per pixel; default: the scene's own.")
     chunks: int | None = Field(None, ge=1, description="Parallel chunks (spp partitions); default: server's.")
     seed: int | None = Field(None, ge=0, le=2**32 - 1, description="Base seed; default: the scene's.")
+    integrator: Literal["hg_path", "rlt"] | None = Field(
+        None,
+        description="`hg_path` (partially coherent transport) or `rlt` (the radiometric baseline: a "
+        "coherent plane wave per sample); default: the scene's `film.integrator`.",
+    )
+    target_rel_error: float | None = Field(
+        None,
+        gt=0,
+        lt=1,
+        description="Noise target: add passes until the relative standard error of every band's image "
+        "mean (or, with `target_quantile`, of the pixel luminance at that quantile) is at most this; "
+        "`spp` is then the first pass's. The job renders as one chunk.",
+    )
+    time_budget_s: float | None = Field(
+        None, gt=0, description="Noise target: add passes while the render time stays within this (s)."
+    )
+    target_quantile: float | None = Field(
+        None,
+        gt=0,
+        le=1,
+        description="Measure `target_rel_error` per pixel (luminance) at this quantile of the lit pixels.",
+    )
     idempotency_key: str | None = Field(
         None,
         min_length=1,

@@ -1,6 +1,7 @@
 """Turning a job request into a validated scene document: JSON bodies, uploaded JSON files, USD files.
 
-The request's ``spp`` and ``seed`` override the scene's ``film.spp`` / ``film.seed`` and the result is
+The request's ``spp``, ``seed`` and ``integrator`` override the scene's ``film.spp`` / ``film.seed`` /
+``film.integrator`` and the result is
 validated again, so the deployment's scene limits (``hgcore.settings.SceneLimits``) apply to the values
 that will actually be rendered. Invalid input raises ``schemas.SceneError`` (JSON pointers into the scene)
 or ValueError; nothing is written or enqueued before this succeeds.
@@ -20,14 +21,16 @@ USD_SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd", ".usdz", ".zip")
 
 
 def apply_overrides(scene_json: dict[str, Any], options: JobOptions, limits: SceneLimits) -> dict[str, Any]:
-    """The validated scene with the request's spp/seed written into its film, validated again."""
-    if options.spp is None and options.seed is None:
+    """The validated scene with the request's spp/seed/integrator written into its film, validated
+    again."""
+    overrides = {
+        key: value
+        for key, value in (("spp", options.spp), ("seed", options.seed), ("integrator", options.integrator))
+        if value is not None
+    }
+    if not overrides:
         return scene_json
-    film = dict(scene_json.get("film", {}))
-    if options.spp is not None:
-        film["spp"] = options.spp
-    if options.seed is not None:
-        film["seed"] = options.seed
+    film = {**scene_json.get("film", {}), **overrides}
     return validate_scene({**scene_json, "film": film}, limits).to_json_dict()
 
 

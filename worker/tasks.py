@@ -24,7 +24,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from rq import get_current_job
@@ -41,18 +41,16 @@ from hgcore.artifacts.keys import (
     scene_key,
     worker_log_key,
 )
-from hgcore.artifacts.pixel_sums import PixelSums
+from hgcore.jobs.keys import job_key
 from hgcore.jobs.queue_graph import chunk_rq_id
 from hgcore.jobs.records import JobRecords
 from hgcore.jobs.status import TERMINAL_STATUSES, JobStatus
+from hgcore.noise_target import NoiseTarget
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
 from schemas.scene import MAX_FILM_MODES, Scene
 from worker.queue_worker import HORSE_TEMP_PREFIX
-
-if TYPE_CHECKING:
-    from worker.render.api import RenderedChunk
 
 CANCEL_POLL_INTERVAL_S = 0.5
 """How often a running chunk re-reads its job's status (a cancel stops it within this plus one pass)."""
@@ -200,72 +198,97 @@ def _step(name: str) -> Iterator[None]:
         raise StepFailedError(f"{name}: {type(error).__name__}: {error}") from error
 
 
-def _render_chunk(
-    jobs: JobRecords, rq_job: RQJob, job_id: str, record: dict[str, str], chunk_index: int, work_dir: Path
-) -> tuple[RenderedChunk, Scene] | None:
-    """Render one chunk (its sums in memory) and return it with the validated scene, or None when the job
-    was canceled meanwhile. Bundle inputs are copied to ``work_dir``."""
-    from worker.render.api import as_scene, plan_chunks, render_chunk_sums
+def _chunk_spec(record: dict[str, str], chunk_index: int) -> Any:
+    from worker.render.api import plan_chunks
 
-    chunk = plan_chunks(int(record["spp"]), int(record["chunks"]), int(record["seed"]))[chunk_index]
+    return plan_chunks(int(record["spp"]), int(record["chunks"]), int(record["seed"]))[chunk_index]
+
+
+def _started(
+    jobs: JobRecords, rq_job: RQJob, job_id: str, record: dict[str, str], chunk_index: int, work_dir: Path
+) -> tuple[Any, Scene, Path | None, _CancelPoll]:
+    """Mark chunk ``chunk_index`` running; its spec, the validated scene, the bundle folder (inputs copied
+    to ``work_dir``) and the cancel poll."""
+    from worker.render.api import as_scene
+
+    chunk = _chunk_spec(record, chunk_index)
     jobs.chunk_started(job_id, chunk_index, rq_job.worker_name or "", os.getpid(), chunk.spp)
-    should_stop = _CancelPoll(jobs, job_id)
     scene_document, bundle_dir = _load_inputs(jobs, job_id, work_dir)
-    scene = as_scene(scene_document)
-    rendered = render_chunk_sums(
-        scene,
-        chunk,
-        progress=_ProgressReporter(jobs, job_id, chunk_index, jobs.settings.progress_interval_s),
-        should_stop=should_stop,
-        bundle_dir=bundle_dir,
-    )
-    if should_stop(force=True):
-        jobs.set_chunk_status(job_id, chunk_index, "canceled")
-        return None
-    return rendered, scene
+    return chunk, as_scene(scene_document), bundle_dir, _CancelPoll(jobs, job_id)
+
+
+def _progress(jobs: JobRecords, job_id: str, chunk_index: int) -> _ProgressReporter:
+    return _ProgressReporter(jobs, job_id, chunk_index, jobs.settings.progress_interval_s)
 
 
 def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
-    """Render chunk ``chunk_index`` of job ``job_id`` and upload its partial buffers."""
+    """Render chunk ``chunk_index`` of job ``job_id`` and upload its partial (streamed tile by tile)."""
     jobs, rq_job = _context()
     record = jobs.record(job_id)
     if (skipped := _skipped(record)) is not None:
         return skipped
-    from worker.render.api import save_chunk
+    from worker.render.api import render_chunk
+    from worker.render.renderer import RenderCanceledError
 
     with horse_work_dir(f"{job_id}-{chunk_index}") as tmp:
-        outcome = _render_chunk(jobs, rq_job, job_id, record, chunk_index, Path(tmp))
-        if outcome is None:
-            return {"canceled": True}
-        rendered, _ = outcome
+        chunk, scene, bundle_dir, should_stop = _started(jobs, rq_job, job_id, record, chunk_index, Path(tmp))
         partial_path = Path(tmp) / f"chunk-{chunk_index}.npz"
-        save_chunk(rendered, partial_path)
+        try:
+            result = render_chunk(
+                scene,
+                chunk,
+                partial_path,
+                progress=_progress(jobs, job_id, chunk_index),
+                should_stop=should_stop,
+                bundle_dir=bundle_dir,
+            )
+        except RenderCanceledError:
+            result = None
+        if result is None or should_stop(force=True):
+            jobs.set_chunk_status(job_id, chunk_index, "canceled")
+            return {"canceled": True}
         jobs.store.put_file(chunk_key(job_id, chunk_index), partial_path)
-    jobs.chunk_finished(job_id, chunk_index, rendered.samples, rendered.seconds)
-    return {"samples": rendered.samples, "seconds": rendered.seconds}
+    jobs.chunk_finished(job_id, chunk_index, result["samples"], result["seconds"])
+    return {"samples": result["samples"], "seconds": result["seconds"]}
 
 
 def render_job_task(job_id: str) -> dict[str, Any]:
-    """Render a job of one chunk and write its final artifacts, in one work horse. A failure on the last
-    attempt fails the job with the step's error."""
+    """Render a job of one chunk (or a noise-target job, which adds rounds in this horse) and write its
+    final artifacts, streamed tile by tile, in one work horse. A failure on the last attempt fails the
+    job with the step's error."""
     jobs, rq_job = _context()
     try:
         record = jobs.record(job_id)
         if (skipped := _skipped(record)) is not None:
             return skipped
+        from worker.render.api import render_to_dir
+        from worker.render.renderer import RenderCanceledError
+
         with horse_work_dir(job_id) as tmp:
             work_dir = Path(tmp)
+            out_dir = work_dir / "out"
             with _step("chunk 0"):
-                outcome = _render_chunk(jobs, rq_job, job_id, record, 0, work_dir)
-            if outcome is None:
+                chunk, scene, bundle_dir, should_stop = _started(jobs, rq_job, job_id, record, 0, work_dir)
+                try:
+                    summary = render_to_dir(
+                        scene,
+                        out_dir,
+                        [chunk],
+                        progress=_progress(jobs, job_id, 0),
+                        should_stop=should_stop,
+                        bundle_dir=bundle_dir,
+                        target=NoiseTarget.from_record(record),
+                        extra_summary={"job_id": job_id},
+                    )
+                except RenderCanceledError:
+                    summary = None
+            if summary is None or should_stop(force=True):
+                jobs.set_chunk_status(job_id, 0, "canceled")
                 return {"canceled": True}
-            rendered, scene = outcome
-            jobs.chunk_finished(job_id, 0, rendered.samples, rendered.seconds)
+            jobs.chunk_finished(job_id, 0, summary["samples"], summary["render_seconds"])
             with _step("merge"):
                 started_s = _merge_started(jobs, rq_job, job_id)
-                return _write_final_artifacts(
-                    jobs, job_id, work_dir, [rendered.sums], rendered.seconds, started_s, scene
-                )
+                return _write_final_artifacts(jobs, job_id, out_dir, summary, started_s)
     except StepFailedError as error:
         _fail_on_last_attempt(jobs, rq_job, job_id, str(error))
         raise
@@ -371,15 +394,16 @@ def merge_task(job_id: str) -> dict[str, Any]:
             _fail(jobs, job_id, "; ".join(failures))
             return {"failed": failures}
         with _step("merge"), horse_work_dir(f"{job_id}-merge") as tmp:
-            from worker.render.api import load_chunks
+            from worker.render.api import merge_chunks
 
             started_s = _merge_started(jobs, rq_job, job_id)
             work_dir = Path(tmp)
             chunk_paths = [work_dir / "chunks" / f"{index}.npz" for index in range(chunk_count)]
             for index, path in enumerate(chunk_paths):
                 jobs.store.get_file(chunk_key(job_id, index), path)
-            chunk_sums, render_seconds = load_chunks(chunk_paths)
-            return _write_final_artifacts(jobs, job_id, work_dir, chunk_sums, render_seconds, started_s)
+            out_dir = work_dir / "out"
+            summary = merge_chunks(jobs.scene(job_id), chunk_paths, out_dir, extra_summary={"job_id": job_id})
+            return _write_final_artifacts(jobs, job_id, out_dir, summary, started_s)
     except StepFailedError as error:
         _fail_on_last_attempt(jobs, rq_job, job_id, str(error))
         raise
@@ -392,25 +416,14 @@ def _merge_started(jobs: JobRecords, rq_job: RQJob, job_id: str) -> float:
 
 
 def _write_final_artifacts(
-    jobs: JobRecords,
-    job_id: str,
-    work_dir: Path,
-    chunk_sums: list[PixelSums],
-    render_seconds: float,
-    started_s: float,
-    scene: Scene | None = None,
+    jobs: JobRecords, job_id: str, out_dir: Path, summary: dict[str, Any], started_s: float
 ) -> dict[str, Any]:
-    """Merge the chunks' sums into the job's artifacts, then its log, scene and manifest, and mark it
-    succeeded (the merge step's bookkeeping is ``merge.<field>``, timed from ``started_s``). ``scene``:
-    the job's scene if it was already validated in this process."""
-    from worker.render.api import write_merged
-
+    """Upload the job's artifacts written to ``out_dir`` (``summary``: its summary.json), then its log,
+    scene and manifest, and mark it succeeded (the merge step's bookkeeping is ``merge.<field>``, timed
+    from ``started_s``). A noise-target job's achieved error goes into its record (the job view)."""
     scene_document = jobs.scene(job_id)
-    out_dir = work_dir / "out"
-    out_dir.mkdir()
-    summary = write_merged(
-        scene or scene_document, chunk_sums, render_seconds, out_dir, extra_summary={"job_id": job_id}
-    )
+    if "noise_target" in summary:
+        jobs.client.hset(job_key(job_id), "noise_target", json.dumps(summary["noise_target"]))
     for path in sorted(out_dir.rglob("*")):
         if path.is_file():
             jobs.store.put_file(artifact_key(job_id, path.relative_to(out_dir).as_posix()), path)

@@ -1,14 +1,17 @@
 """The one OpenEXR reader and writer of hgrender (OpenImageIO).
 
 ``read_exr`` returns every channel of the first subimage as float32 (H, W) arrays with the header's
-string attributes; ``write_exr`` writes float32 channels, ZIP-compressed, atomically (a temporary file in
-the same directory, then ``os.replace``), so a reader never sees half a file. Every failure to read or
-write an image is an :class:`ArtifactFormatError` naming the file, never a bare ``OSError`` or ``None``.
+string attributes; ``write_exr`` (whole images) and ``exr_scanline_writer`` (row band by row band,
+for images that do not fit in memory at once) write float32 channels, ZIP-compressed, atomically (a
+temporary file in the same directory, then ``os.replace``), so a reader never sees half a file. Every
+failure to read or write an image is an :class:`ArtifactFormatError` naming the file, never a bare
+``OSError`` or ``None``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,25 +87,60 @@ def read_exr(path: Path) -> ExrImage:
 
 def write_exr(path: Path, channels: Sequence[tuple[str, np.ndarray]], attributes: dict[str, str]) -> None:
     """Write (name, (H, W) array) ``channels`` as float32 with ``attributes``, atomically."""
-    import OpenImageIO as oiio
-
     if not channels:
         raise ArtifactFormatError(f"{Path(path).name}: an EXR needs at least one channel")
     height, width = channels[0][1].shape
-    pixels = np.stack([data for _, data in channels], axis=-1).astype(np.float32)
-    spec = oiio.ImageSpec(width, height, len(channels), "float")
-    spec.channelnames = tuple(name for name, _ in channels)
+    with exr_scanline_writer(path, width, height, [name for name, _ in channels], attributes) as writer:
+        writer.write_rows(0, [data for _, data in channels])
+
+
+class ExrScanlineWriter:
+    """An open EXR being written row band by row band (OpenImageIO scanline writes, top to bottom)."""
+
+    def __init__(self, output: object, name: str, width: int, height: int, channel_count: int) -> None:
+        self._output, self._name = output, name
+        self.width, self.height, self.channel_count = width, height, channel_count
+        self.rows_written = 0
+
+    def write_rows(self, y0: int, channels: Sequence[np.ndarray]) -> None:
+        """Rows [y0, y0 + rows) of every channel ((rows, W) arrays, file order); y0 continues the file."""
+        import OpenImageIO as oiio
+
+        if len(channels) != self.channel_count or y0 != self.rows_written:
+            raise ArtifactFormatError(f"{self._name}: rows must come in order with every channel")
+        pixels = np.ascontiguousarray(np.stack(channels, axis=-1), dtype=np.float32)
+        rows = pixels.shape[0]
+        if not self._output.write_scanlines(y0, y0 + rows, 0, pixels):  # type: ignore[attr-defined]
+            raise ArtifactFormatError(f"{self._name}: cannot be written ({_oiio_reason(oiio)})")
+        self.rows_written += rows
+
+
+@contextmanager
+def exr_scanline_writer(
+    path: Path, width: int, height: int, channel_names: Sequence[str], attributes: dict[str, str]
+) -> Iterator[ExrScanlineWriter]:
+    """An ``ExrScanlineWriter`` for a float32, ZIP-compressed EXR at ``path``: the file appears
+    (atomically) when the block ends with every row written; memory holds one row band, not the image."""
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    if not channel_names:
+        raise ArtifactFormatError(f"{path.name}: an EXR needs at least one channel")
+    spec = oiio.ImageSpec(width, height, len(channel_names), "float")
+    spec.channelnames = tuple(channel_names)
     spec.attribute("compression", "zip")
     for key, value in attributes.items():
         spec.attribute(key, value)
-    path = Path(path)
     with atomic_output(path, suffix=".exr") as temporary:
         output = oiio.ImageOutput.create(str(temporary))
         if output is None or not output.open(str(temporary), spec):
             raise ArtifactFormatError(f"{path.name}: cannot be written ({_oiio_reason(oiio)})")
-        written = output.write_image(pixels)
-        output.close()
-        if not written:
+        writer = ExrScanlineWriter(output, path.name, width, height, len(channel_names))
+        try:
+            yield writer
+        finally:
+            closed = output.close()
+        if writer.rows_written != height or not closed:
             raise ArtifactFormatError(f"{path.name}: cannot be written ({_oiio_reason(oiio)})")
 
 

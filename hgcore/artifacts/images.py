@@ -13,13 +13,15 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hgcore.artifacts.exr import write_exr
+from hgcore.artifacts.exr import ExrScanlineWriter, exr_scanline_writer
 from hgcore.artifacts.layout import (
     COHERENCE_DIAGNOSTICS,
     COHERENCE_WEIGHT,
@@ -167,16 +169,24 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
     }
 
 
+def image_channel_layout(bands: BandLayout) -> list[tuple[str, str, int | None]]:
+    """``image.exr``'s channels in file order: (channel name, key in ``images_from_sums``, index along its
+    last axis or None)."""
+    layout: list[tuple[str, str, int | None]] = [(name, "rgb", i) for i, name in enumerate(RGB_CHANNELS)]
+    layout += [(name, "bands", b) for b, name in enumerate(bands.channel_names())]
+    layout += [(coherence_channel(key), coherence_channel(key), None) for key in COHERENCE_DIAGNOSTICS]
+    layout += [(COHERENCE_WEIGHT, COHERENCE_WEIGHT, None), ("depth", "depth", None)]
+    layout += [(f"normal.{axis}", "normal", i) for i, axis in enumerate("XYZ")]
+    layout += [(f"albedo.{c}", "albedo", i) for i, c in enumerate("RGB")]
+    return layout
+
+
 def image_channels(images: dict[str, np.ndarray], bands: BandLayout) -> list[tuple[str, np.ndarray]]:
     """The (name, (H, W) array) channels of ``image.exr`` in file order."""
-    channels = [(name, images["rgb"][..., i]) for i, name in enumerate(RGB_CHANNELS)]
-    channels += [(name, images["bands"][..., b]) for b, name in enumerate(bands.channel_names())]
-    channels += [(coherence_channel(key), images[coherence_channel(key)]) for key in COHERENCE_DIAGNOSTICS]
-    channels += [(COHERENCE_WEIGHT, images[COHERENCE_WEIGHT])]
-    channels += [("depth", images["depth"])]
-    channels += [(f"normal.{axis}", images["normal"][..., i]) for i, axis in enumerate("XYZ")]
-    channels += [(f"albedo.{c}", images["albedo"][..., i]) for i, c in enumerate("RGB")]
-    return channels
+    return [
+        (name, images[key] if index is None else images[key][..., index])
+        for name, key, index in image_channel_layout(bands)
+    ]
 
 
 def channels_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray]:
@@ -188,14 +198,85 @@ def channels_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarr
     }
 
 
-def write_images(images: dict[str, np.ndarray], bands: BandLayout, out_dir: Path) -> list[str]:
-    """image.exr, variance.exr and preview.png into ``out_dir``; returns the file names."""
-    write_exr(out_dir / IMAGE_EXR, image_channels(images, bands), SPECTRAL_ATTRIBUTES)
-    variance = [(name, images["band_variance"][..., b]) for b, name in enumerate(bands.channel_names())]
-    variance.append((LUMINANCE_VARIANCE, images["luminance_variance"]))
-    write_exr(out_dir / VARIANCE_EXR, variance, SPECTRAL_ATTRIBUTES)
-    atomic_write_bytes(out_dir / PREVIEW_PNG, preview_png(images["rgb"]))
-    return [IMAGE_EXR, VARIANCE_EXR, PREVIEW_PNG]
+def variance_channels(images: dict[str, np.ndarray], bands: BandLayout) -> list[tuple[str, np.ndarray]]:
+    """The (name, (H, W) array) channels of ``variance.exr`` in file order."""
+    channels = [(name, images["band_variance"][..., b]) for b, name in enumerate(bands.channel_names())]
+    return [*channels, (LUMINANCE_VARIANCE, images["luminance_variance"])]
+
+
+STATISTIC_KEYS = ("l1_um", "l2_um", "anisotropy", "area_um2", "r_m")
+
+
+class ImageSetWriter:
+    """Writes a render's images from its sums row band by row band (see ``image_set_writer``): each band's
+    means and diagnostics are per-pixel functions of that band's sums, so building them band by band
+    gives the whole image's pixels; only the preview's RGB and the covered pixels' statistic values are
+    kept for the whole image (3 + ≤ 5 float32 per pixel)."""
+
+    def __init__(
+        self,
+        bands: BandLayout,
+        width: int,
+        height: int,
+        image: ExrScanlineWriter,
+        variance: ExrScanlineWriter,
+    ) -> None:
+        self.bands, self.width, self.height = bands, width, height
+        self._image, self._variance = image, variance
+        self.rgb = np.zeros((height, width, 3), dtype=np.float32)
+        self._statistics: dict[str, list[np.ndarray]] = {key: [] for key in STATISTIC_KEYS}
+        self._covered = 0
+        self.rows_written = 0
+
+    def write_rows(self, sums: PixelSums) -> None:
+        """The images of the next rows (their sums), appended to image.exr and variance.exr."""
+        y0, y1 = self.rows_written, self.rows_written + sums.rows
+        images = images_from_sums(sums, self.bands)
+        self._image.write_rows(y0, [data for _, data in image_channels(images, self.bands)])
+        self._variance.write_rows(y0, [data for _, data in variance_channels(images, self.bands)])
+        self.rgb[y0:y1] = images["rgb"]
+        covered = images[COHERENCE_WEIGHT] > 0
+        self._covered += int(covered.sum())
+        for key in STATISTIC_KEYS:
+            self._statistics[key].append(images[coherence_channel(key)][covered])
+        self.rows_written = y1
+
+    def coherence_statistics(self) -> dict[str, Any]:
+        """Mean and percentiles of ℓ₁, ℓ₂, anisotropy, area and r over pixels with diagnostics."""
+        stats: dict[str, Any] = {"covered_pixels": self._covered}
+        for key in STATISTIC_KEYS:
+            values = np.concatenate(self._statistics[key])
+            if values.size == 0:
+                stats[key] = None
+                continue
+            stats[key] = {
+                "mean": float(values.mean()),
+                "p5": float(np.percentile(values, 5)),
+                "p50": float(np.percentile(values, 50)),
+                "p95": float(np.percentile(values, 95)),
+            }
+        return stats
+
+
+@contextmanager
+def image_set_writer(out_dir: Path, bands: BandLayout, width: int, height: int) -> Iterator[ImageSetWriter]:
+    """An ``ImageSetWriter`` for image.exr and variance.exr in ``out_dir``; preview.png is written when
+    the block ends (its exposure needs the whole image). Files: ``IMAGE_FILES``."""
+    out_dir = Path(out_dir)
+    image_names = [name for name, _, _ in image_channel_layout(bands)]
+    variance_names = [*bands.channel_names(), LUMINANCE_VARIANCE]
+    with (
+        exr_scanline_writer(out_dir / IMAGE_EXR, width, height, image_names, SPECTRAL_ATTRIBUTES) as image,
+        exr_scanline_writer(
+            out_dir / VARIANCE_EXR, width, height, variance_names, SPECTRAL_ATTRIBUTES
+        ) as variance,
+    ):
+        writer = ImageSetWriter(bands, width, height, image, variance)
+        yield writer
+    atomic_write_bytes(out_dir / PREVIEW_PNG, preview_png(writer.rgb))
+
+
+IMAGE_FILES = [IMAGE_EXR, VARIANCE_EXR, PREVIEW_PNG]
 
 
 def preview_png(rgb: np.ndarray) -> bytes:
@@ -207,24 +288,6 @@ def preview_png(rgb: np.ndarray) -> bytes:
     buffer = io.BytesIO()
     Image.fromarray(display_rgb8(rgb, preview_exposure_ev(rgb))).save(buffer, format="PNG")
     return buffer.getvalue()
-
-
-def coherence_statistics(images: dict[str, np.ndarray]) -> dict[str, Any]:
-    """Mean and percentiles of ℓ₁, ℓ₂, anisotropy and area over pixels with diagnostics."""
-    covered = images[COHERENCE_WEIGHT] > 0
-    stats: dict[str, Any] = {"covered_pixels": int(covered.sum())}
-    for key in ("l1_um", "l2_um", "anisotropy", "area_um2", "r_m"):
-        values = images[coherence_channel(key)][covered]
-        if values.size == 0:
-            stats[key] = None
-            continue
-        stats[key] = {
-            "mean": float(values.mean()),
-            "p5": float(np.percentile(values, 5)),
-            "p50": float(np.percentile(values, 50)),
-            "p95": float(np.percentile(values, 95)),
-        }
-    return stats
 
 
 def write_summary(out_dir: Path, summary: dict[str, Any]) -> None:

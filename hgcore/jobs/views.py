@@ -4,6 +4,7 @@ bookkeeping (``keys.job_key`` / ``keys.chunks_key``) into it: progress is the me
 
 from __future__ import annotations
 
+import json
 import time
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -36,6 +37,35 @@ class JobTimings(BaseModel):
     total_s: float | None = None
 
 
+class NoiseTargetView(BaseModel):
+    """A noise-target job's request and, once it succeeded, what it achieved (``summary.json``'s
+    ``noise_target`` block, ``hgcore.noise_target``)."""
+
+    target_rel_error: float | None = Field(None, description="Requested relative standard error.")
+    time_budget_s: float | None = Field(None, description="Requested render time budget (s).")
+    target_quantile: float | None = Field(None, description="Pixel quantile of the luminance measure.")
+    metric: str | None = Field(None, description="`band_mean` or `luminance_quantile`.")
+    achieved_rel_error: float | None = Field(None, description="The error reached, in `metric`.")
+    band_rel_error: list[float] | None = Field(None, description="Relative error of each band's mean.")
+    met: bool | None = Field(None, description="Whether `achieved_rel_error` ≤ `target_rel_error`.")
+    stop_reason: str | None = Field(None, description="`target_met`, `time_budget` or `max_spp`.")
+    spp: int | None = Field(None, description="Samples per pixel rendered in all rounds.")
+    rounds: list[dict[str, float]] | None = Field(None, description="Each round's total spp, s, error.")
+
+
+def _noise_target_view(record: dict[str, str]) -> NoiseTargetView | None:
+    """The record's requested target (``hgcore.noise_target.RECORD_FIELDS``) plus the achieved block
+    (JSON in ``noise_target``) once the job wrote it."""
+    requested = {
+        name: _float_or_none(record.get(name))
+        for name in ("target_rel_error", "time_budget_s", "target_quantile")
+    }
+    if all(value is None for value in requested.values()):
+        return None
+    achieved = json.loads(record["noise_target"]) if record.get("noise_target") else {}
+    return NoiseTargetView(**(achieved | requested))
+
+
 class JobView(BaseModel):
     """``GET /v1/jobs/{id}``."""
 
@@ -55,6 +85,9 @@ class JobView(BaseModel):
     workers: list[str] = Field(default_factory=list, description="Workers that ran chunks or the merge.")
     error: str | None = None
     timings: JobTimings
+    noise_target: NoiseTargetView | None = Field(
+        None, description="A noise-target job's request and achieved error (null: a fixed-spp job)."
+    )
     chunks: list[ChunkView] = Field(default_factory=list)
 
     model_config = ConfigDict(
@@ -134,5 +167,6 @@ def build_view(record: dict[str, str], chunk_fields: dict[str, str], now: float 
             merge_s=_float_or_none(chunk_fields.get("merge.seconds")),
             total_s=finished_at - created_at if finished_at is not None else None,
         ),
+        noise_target=_noise_target_view(record),
         chunks=chunks,
     )

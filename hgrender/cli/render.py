@@ -38,6 +38,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"render in K chunks and merge (default 1; with --tev {TEV_DEFAULT_CHUNKS})",
     )
     parser.add_argument(
+        "--target-rel-error",
+        type=float,
+        metavar="E",
+        help="noise target: add passes until the relative standard error of every band's image mean "
+        "(or, with --target-quantile, of the pixel luminance at that quantile) is at most E; --spp is "
+        "then the first pass's spp",
+    )
+    parser.add_argument(
+        "--time-budget-s",
+        type=float,
+        metavar="T",
+        help="noise target: add passes while the render time stays within T seconds",
+    )
+    parser.add_argument(
+        "--target-quantile",
+        type=float,
+        metavar="Q",
+        help="measure --target-rel-error per pixel (luminance) at this quantile of the pixels, in (0, 1]",
+    )
+    parser.add_argument(
         "--variant",
         choices=("auto", "llvm_ad_spectral", "cuda_ad_spectral"),
         help="Mitsuba variant (default: HGRENDER_VARIANT or auto)",
@@ -77,10 +97,12 @@ def run(args: argparse.Namespace) -> int:
     if args.variant:
         os.environ["HGRENDER_VARIANT"] = args.variant
     scene, bundle_dir = load_scene_file(args.scene)
+    from hgcore.noise_target import NoiseTarget
     from schemas.validation import validate_scene
     from worker.render.api import render_scene
 
     parsed = validate_scene(scene)
+    target = NoiseTarget.from_options(args.target_rel_error, args.time_budget_s, args.target_quantile)
     chunks = args.chunks if args.chunks is not None else (TEV_DEFAULT_CHUNKS if args.tev else 1)
     with contextlib.ExitStack() as stack:
         # tev first: a tev that is not running is reported before any rendering starts.
@@ -97,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
             progress=display.update,
             bundle_dir=bundle_dir,
             on_chunk=None if tev is None else lambda sums: tev.show(channels_of_sums(sums, parsed.film)),
+            target=target,
         )
     print(
         json.dumps(
@@ -105,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
                 "spp": summary["spp"],
                 "samples_per_second": summary["samples_per_second"],
                 "files": summary["files"],
+                **({"noise_target": summary["noise_target"]} if "noise_target" in summary else {}),
             }
         )
     )

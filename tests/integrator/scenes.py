@@ -27,3 +27,7 @@ def plane_under_source(
         ],
         emitters=[source],
     )
+
+
+D65_SPHERE_SOURCE: dict[str, Any] = build.sphere([0.0, 0.3, 1.0], 0.2, spectrum={"type": "d65"}, power_w=50.0)
+"""A bright white sphere source for ``plane_under_source`` (tiles and noise-target tests)."""

@@ -1,31 +1,35 @@
 """The renderer's public interface: plan chunks, render a chunk, merge chunks, render a whole scene.
 
 A render of S samples per pixel with seed s splits into K chunks of ⌈S/K⌉ or ⌊S/K⌋ spp with distinct
-derived seeds; each chunk writes its per-pixel sums to a ``.npz`` partial, and the merge adds them. The
-merged image therefore has exactly S samples per pixel and the same expectation as an unsplit render
-(the unsplit render is the K = 1 plan, so it is bitwise reproducible given S and s).
+derived seeds (``plan_chunks``). The image renders in tiles (row bands, ``Renderer.tiles``) whose samples
+depend only on (chunk seed, tile, pass), so a chunk's tiles and a render's chunks can run in any order or
+process and give the same sums. A chunk's sums are rounded to float32 once (``PixelSums.rounded``: what
+its ``.npz`` partial stores) and the chunks' sums are added in float64 in chunk order, tile by tile, so a
+local render (``render_scene``), a service job of one chunk and the merge of K uploaded partials
+(``merge_chunks``) write bitwise-identical images for the same plan; the unsplit render is the K = 1
+plan. Nothing holds more than one tile of per-pixel sums: image.exr and variance.exr are written band by
+band (``hgcore.artifacts.images.image_set_writer``), partials are streamed in and out by rows. Two
+exceptions keep the whole image's sums in memory: a render with ``on_chunk`` previews (tev) and a
+noise-target render (``hgcore.noise_target``: its error is a statistic over all pixels).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hgcore.artifacts.images import (
-    coherence_statistics,
-    images_from_sums,
-    write_images,
-    write_summary,
-)
+from hgcore import noise_target
+from hgcore.artifacts.images import IMAGE_FILES, image_set_writer, write_summary
 from hgcore.artifacts.layout import SUMMARY_JSON, BandLayout
-from hgcore.artifacts.pixel_sums import PixelSums, read_partial, write_partial
+from hgcore.artifacts.pixel_sums import PartialReader, PixelSums, iter_merged_rows, partial_writer
 from hgcore.errors import InputError
-from schemas.scene import Scene
+from hgcore.noise_target import NoiseTarget
+from schemas.scene import ABSOLUTE_MAX_SPP, Scene
 from schemas.validation import validate_scene
-from worker.render.renderer import Renderer
+from worker.render.renderer import Renderer, tile_rows
 from worker.render.scene_compiler import SceneCompiler
 
 ProgressCallback = Callable[[float], None]
@@ -38,6 +42,11 @@ class ChunkSpec:
     seed: int
 
 
+def chunk_seed(base_seed: int, index: int) -> int:
+    """The seed of chunk ``index`` of a render with ``base_seed`` (chunk 0 keeps the base seed)."""
+    return (base_seed + 0x632BE5AB * index) & 0xFFFFFFFF
+
+
 def plan_chunks(total_spp: int, chunk_count: int, base_seed: int) -> list[ChunkSpec]:
     """Split ``total_spp`` into ``chunk_count`` chunks (≥ 1 spp each) with distinct seeds."""
     if total_spp < 1:
@@ -47,7 +56,7 @@ def plan_chunks(total_spp: int, chunk_count: int, base_seed: int) -> list[ChunkS
     chunk_count = min(chunk_count, total_spp)
     base, extra = divmod(total_spp, chunk_count)
     return [
-        ChunkSpec(index, base + (1 if index < extra else 0), (base_seed + 0x632BE5AB * index) & 0xFFFFFFFF)
+        ChunkSpec(index, base + (1 if index < extra else 0), chunk_seed(base_seed, index))
         for index in range(chunk_count)
     ]
 
@@ -71,48 +80,62 @@ def renderer_for(scene: Scene, bundle_dir: Path | None = None) -> Renderer:
     return _renderers[key]
 
 
-@dataclass(frozen=True)
-class RenderedChunk:
-    """One chunk's per-pixel sums and how long its render took (seconds, wall clock)."""
-
-    chunk: ChunkSpec
-    sums: PixelSums
-    seconds: float
-    pixels: int
-
-    @property
-    def samples(self) -> int:
-        return self.chunk.spp * self.pixels
-
-    def result(self) -> dict[str, Any]:
-        return {
-            "index": self.chunk.index,
-            "spp": self.chunk.spp,
-            "samples": self.samples,
-            "seconds": self.seconds,
-            "samples_per_second": self.samples / self.seconds if self.seconds > 0 else None,
-        }
+def film_bands(scene: Scene) -> BandLayout:
+    film = scene.film
+    return BandLayout(film.wavelength_min_nm, film.wavelength_max_nm, film.bands)
 
 
-def render_chunk_sums(
-    scene: Scene | dict[str, Any],
-    chunk: ChunkSpec,
+class _Progress:
+    """Progress of a render over ``total`` units (samples) reported as a fraction in [0, 1], never
+    decreasing (a noise-target render raises ``total`` when it plans another round)."""
+
+    def __init__(self, callback: ProgressCallback | None, total: float) -> None:
+        self.callback, self.total, self.done = callback, max(total, 1.0), 0.0
+        self.reported = 0.0
+
+    def part(self, units: float) -> ProgressCallback:
+        """A callback for a part of ``units`` units, starting where the parts before it ended."""
+        start = self.done
+        self.done += units
+
+        def report(fraction: float) -> None:
+            self.reported = max(self.reported, min(1.0, (start + fraction * units) / self.total))
+            if self.callback is not None:
+                self.callback(self.reported)
+
+        return report
+
+
+class RenderTimer:
+    """Seconds spent rendering (tiles and passes), apart from writing files between tiles."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+
+
+def render_tiles(
+    renderer: Renderer,
+    chunks: Sequence[ChunkSpec],
     *,
     progress: ProgressCallback | None = None,
     should_stop: Callable[[], bool] | None = None,
-    bundle_dir: Path | None = None,
-) -> RenderedChunk:
-    """Render one chunk and keep its per-pixel sums in memory."""
-    parsed = as_scene(scene)
-    start = time.perf_counter()
-    renderer = renderer_for(parsed, bundle_dir)
-    sums = renderer.render_sums(chunk.spp, chunk.seed, progress=progress, should_stop=should_stop)
-    return RenderedChunk(chunk, sums, time.perf_counter() - start, renderer.width * renderer.height)
-
-
-def save_chunk(rendered: RenderedChunk, out_path: Path) -> None:
-    """Write a chunk's sums to ``out_path`` (.npz, atomic), the partial that ``merge_chunks`` adds up."""
-    write_partial(out_path, rendered.sums, rendered.seconds, rendered.chunk.index, rendered.chunk.seed)
+    timer: RenderTimer | None = None,
+) -> Iterator[PixelSums]:
+    """The image's sums tile by tile (top to bottom): each tile's chunks rendered, rounded and added in
+    chunk order. Only the tile being yielded is held."""
+    tiles = renderer.tiles()
+    tracker = _Progress(progress, sum(c.spp for c in chunks) * renderer.width * renderer.height)
+    for index, (y0, y1) in enumerate(tiles):
+        total: PixelSums | None = None
+        for chunk in chunks:
+            started = time.perf_counter()
+            report = tracker.part(chunk.spp * (y1 - y0) * renderer.width)
+            sums = renderer.render_tile_sums(index, chunk.spp, chunk.seed, report, should_stop).rounded()
+            total = sums if total is None else total.add(sums)
+            if timer is not None:
+                timer.seconds += time.perf_counter() - started
+        assert total is not None
+        yield total
 
 
 def render_chunk(
@@ -124,18 +147,24 @@ def render_chunk(
     should_stop: Callable[[], bool] | None = None,
     bundle_dir: Path | None = None,
 ) -> dict[str, Any]:
-    """Render one chunk and write its per-pixel sums to ``out_path`` (.npz, atomic)."""
-    rendered = render_chunk_sums(
-        scene, chunk, progress=progress, should_stop=should_stop, bundle_dir=bundle_dir
-    )
-    save_chunk(rendered, out_path)
-    return rendered.result()
-
-
-def load_chunks(paths: Sequence[Path]) -> tuple[list[PixelSums], float]:
-    """The chunks' sums, in the order given, and their render time summed (seconds)."""
-    loaded = [read_partial(Path(path)) for path in paths]
-    return [sums for sums, _ in loaded], sum(seconds for _, seconds in loaded)
+    """Render one chunk and stream its per-pixel sums, tile by tile, to ``out_path`` (.npz, atomic).
+    Returns its index, spp, samples, seconds (scene load included) and samples per second."""
+    parsed = as_scene(scene)
+    start = time.perf_counter()
+    renderer = renderer_for(parsed, bundle_dir)
+    with partial_writer(out_path, renderer.width, renderer.height, parsed.film.bands) as writer:
+        for sums in render_tiles(renderer, [chunk], progress=progress, should_stop=should_stop):
+            writer.write_rows(sums)
+        seconds = time.perf_counter() - start
+        writer.finish(chunk.spp, seconds, chunk.index, chunk.seed)
+    samples = chunk.spp * renderer.width * renderer.height
+    return {
+        "index": chunk.index,
+        "spp": chunk.spp,
+        "samples": samples,
+        "seconds": seconds,
+        "samples_per_second": samples / seconds if seconds > 0 else None,
+    }
 
 
 def merge_chunks(
@@ -145,57 +174,164 @@ def merge_chunks(
     *,
     extra_summary: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Add the chunks' sums and write image.exr, variance.exr, preview.png and summary.json."""
+    """Add the chunks' partials (in chunk-index order), row band by row band, and write image.exr,
+    variance.exr, preview.png and summary.json."""
     if not chunk_paths:
         raise InputError("chunk_paths: at least one chunk is needed")
-    chunk_sums, render_seconds = load_chunks(sorted(chunk_paths, key=lambda p: str(p)))
-    return write_merged(scene, chunk_sums, render_seconds, out_dir, extra_summary=extra_summary)
+    parsed = as_scene(scene)
+    readers = sorted((PartialReader(Path(path)) for path in chunk_paths), key=lambda r: r.chunk_index)
+    width, height = parsed.film.width, parsed.film.height
+    if any((r.width, r.height, r.band_count) != (width, height, parsed.film.bands) for r in readers):
+        raise InputError("chunk_paths: a partial's size or bands differ from the scene's film")
+    rows = tile_rows(width, height)
+    row_bands = [(y0, min(y0 + rows, height)) for y0 in range(0, height, rows)]
+    return write_merged(
+        parsed,
+        iter_merged_rows(readers, row_bands),
+        out_dir,
+        chunks=len(readers),
+        render_seconds=lambda: sum(r.seconds for r in readers),
+        extra_summary=extra_summary,
+    )
 
 
 def write_merged(
     scene: Scene | dict[str, Any],
-    chunk_sums: Sequence[PixelSums],
-    render_seconds: float,
+    row_bands: Iterable[PixelSums],
     out_dir: Path,
     *,
+    chunks: int,
+    render_seconds: Callable[[], float],
     extra_summary: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Add chunks' sums (in memory) and write image.exr, variance.exr, preview.png and summary.json.
-    ``render_seconds``: the chunks' render time, summed."""
+    """Write image.exr, variance.exr, preview.png and summary.json from the merged sums, row band by row
+    band (top to bottom). ``render_seconds()``: the render time, read once every band was consumed."""
     parsed = as_scene(scene)
-    if not chunk_sums:
-        raise InputError("chunk_sums: at least one chunk is needed")
-    total = chunk_sums[0]
-    for sums in chunk_sums[1:]:
-        total = total.add(sums)
     film = parsed.film
-    bands = BandLayout(film.wavelength_min_nm, film.wavelength_max_nm, film.bands)
-    images = images_from_sums(total, bands)
     out_dir = Path(out_dir)
-    files = write_images(images, bands, out_dir)
-    samples = total.sample_count * film.width * film.height
+    sample_count = 0
+    with image_set_writer(out_dir, film_bands(parsed), film.width, film.height) as writer:
+        for sums in row_bands:
+            sample_count = sums.sample_count
+            writer.write_rows(sums)
+    seconds = render_seconds()
+    samples = sample_count * film.width * film.height
     from worker.mitsuba_setup import load_mitsuba
 
     summary = {
         "scene": parsed.name,
         "width": film.width,
         "height": film.height,
-        "spp": total.sample_count,
+        "spp": sample_count,
         "bands": film.bands,
-        "band_centers_nm": bands.centers_nm.tolist(),
+        "band_centers_nm": film_bands(parsed).centers_nm.tolist(),
         "modes": film.modes,
         "max_depth": film.max_depth,
-        "chunks": len(chunk_sums),
+        "integrator": film.integrator,
+        "chunks": chunks,
         "variant": load_mitsuba().variant(),
-        "render_seconds": render_seconds,
+        "render_seconds": seconds,
         "samples": samples,
-        "samples_per_second": samples / render_seconds if render_seconds > 0 else None,
-        "coherence": coherence_statistics(images),
-        "files": [*files, SUMMARY_JSON],
+        "samples_per_second": samples / seconds if seconds > 0 else None,
+        "coherence": writer.coherence_statistics(),
+        "files": [*IMAGE_FILES, SUMMARY_JSON],
         **(extra_summary or {}),
     }
     write_summary(out_dir, summary)
     return summary
+
+
+def render_to_dir(
+    scene: Scene,
+    out_dir: Path,
+    plan: Sequence[ChunkSpec],
+    *,
+    progress: ProgressCallback | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    bundle_dir: Path | None = None,
+    on_chunk: Callable[[PixelSums], None] | None = None,
+    target: NoiseTarget | None = None,
+    extra_summary: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Render ``plan``'s chunks in this process and write the final artifacts to ``out_dir``.
+
+    Streams tile by tile unless ``on_chunk(sums)`` wants the running sum of the chunks finished so far
+    after each one (previews) or a noise ``target`` adds chunks (rounds) until it is met; those two hold
+    the whole image's sums, in chunk-major order, which gives the same bits (the same rounded chunk tile
+    sums added in the same order)."""
+    load_started = time.perf_counter()
+    renderer = renderer_for(scene, bundle_dir)
+    load_seconds = time.perf_counter() - load_started  # counted as render time, as a chunk's is
+    if on_chunk is None and target is None:
+        timer = RenderTimer()
+        timer.seconds = load_seconds
+        tiles = render_tiles(renderer, plan, progress=progress, should_stop=should_stop, timer=timer)
+        return write_merged(
+            scene,
+            tiles,
+            out_dir,
+            chunks=len(plan),
+            render_seconds=lambda: timer.seconds,
+            extra_summary=extra_summary,
+        )
+    started = time.perf_counter()
+    tracker = _Progress(progress, sum(c.spp for c in plan))
+    running: PixelSums | None = None
+    rounds: list[dict[str, Any]] = []
+    chunks = list(plan)
+    render_seconds = load_seconds
+    index = 0
+    while index < len(chunks):
+        chunk = chunks[index]
+        chunk_started = time.perf_counter()
+        sums = renderer.render_sums(chunk.spp, chunk.seed, tracker.part(chunk.spp), should_stop).rounded()
+        render_seconds += time.perf_counter() - chunk_started
+        running = sums if running is None else running.add(sums)
+        if on_chunk is not None:
+            on_chunk(running)
+        index += 1
+        if target is not None and index == len(chunks):
+            error = noise_target.achieved_error(target, running)
+            rounds.append({"spp": running.sample_count, "seconds": render_seconds, "rel_error": error})
+            more = noise_target.next_round_spp(
+                target,
+                running.sample_count,
+                error,
+                render_seconds,
+                time.perf_counter() - started,
+                ABSOLUTE_MAX_SPP,
+            )
+            if more > 0:
+                chunks.append(ChunkSpec(len(chunks), more, chunk_seed(scene.film.seed, len(chunks))))
+                # The total is now a prediction: progress runs over the samples planned so far.
+                tracker.total += more
+    assert running is not None
+    extra = dict(extra_summary or {})
+    if target is not None:
+        reason = noise_target.stop_reason(
+            target, rounds[-1]["rel_error"], running.sample_count, ABSOLUTE_MAX_SPP
+        )
+        extra["noise_target"] = noise_target.summary_block(target, running, rounds, reason)
+    rows = tile_rows(renderer.width, renderer.height)
+    total = running
+    row_bands = (total.row_slice(y0, y0 + rows) for y0 in range(0, renderer.height, rows))
+    return write_merged(
+        scene,
+        row_bands,
+        out_dir,
+        chunks=len(chunks),
+        render_seconds=lambda: render_seconds,
+        extra_summary=extra,
+    )
+
+
+def with_overrides(scene: Scene | dict[str, Any], **overrides: Any) -> Scene:
+    """The scene with the film fields in ``overrides`` that are not None replaced (validated again)."""
+    parsed = as_scene(scene)
+    changes = {key: value for key, value in overrides.items() if value is not None}
+    if not changes:
+        return parsed
+    return validate_scene({**parsed.to_json_dict(), "film": {**parsed.film.model_dump(), **changes}})
 
 
 def render_scene(
@@ -210,39 +346,18 @@ def render_scene(
     progress: ProgressCallback | None = None,
     bundle_dir: Path | None = None,
     on_chunk: Callable[[PixelSums], None] | None = None,
+    target: NoiseTarget | None = None,
 ) -> dict[str, Any]:
-    """Render locally (chunks run one after another) and write the final artifacts to ``out_dir``.
-    ``on_chunk(sums)`` gets the running sum of the chunks finished so far after each one (previews)."""
-    parsed = as_scene(scene)
-    overrides = {
-        key: value
-        for key, value in (("spp", spp), ("seed", seed), ("modes", modes), ("integrator", integrator))
-        if value is not None
-    }
-    if overrides:
-        parsed = validate_scene({**parsed.to_json_dict(), "film": {**parsed.film.model_dump(), **overrides}})
-    out_dir = Path(out_dir)
+    """Render locally and write the final artifacts to ``out_dir`` (``render_to_dir``). With a noise
+    ``target``, ``spp`` (or film.spp) is the first round's."""
+    parsed = with_overrides(scene, spp=spp, seed=seed, modes=modes, integrator=integrator)
     plan = plan_chunks(parsed.film.spp, chunks, parsed.film.seed)
-    partial_dir = out_dir / ".chunks"
-    paths = []
-    done_spp = 0
-    running: PixelSums | None = None
-    for chunk in plan:
-
-        def chunk_progress(fraction: float, chunk: ChunkSpec = chunk, done: int = done_spp) -> None:
-            if progress is not None:
-                progress((done + fraction * chunk.spp) / parsed.film.spp)
-
-        path = partial_dir / f"{chunk.index:04d}.npz"
-        rendered = render_chunk_sums(parsed, chunk, progress=chunk_progress, bundle_dir=bundle_dir)
-        save_chunk(rendered, path)
-        paths.append(path)
-        done_spp += chunk.spp
-        if on_chunk is not None:
-            running = rendered.sums if running is None else running.add(rendered.sums)
-            on_chunk(running)
-    summary = merge_chunks(parsed, paths, out_dir)
-    for path in paths:
-        path.unlink(missing_ok=True)
-    partial_dir.rmdir()
-    return summary
+    return render_to_dir(
+        parsed,
+        Path(out_dir),
+        plan,
+        progress=progress,
+        bundle_dir=bundle_dir,
+        on_chunk=on_chunk,
+        target=target,
+    )

@@ -1,9 +1,11 @@
 """Runs ``hg_path`` over the image and reduces samples into per-pixel sums (deterministically).
 
-Samples are laid out pixel-major (wavefront index = pixel·spp + s) and reduced with ``dr.block_sum``, so
-sums do not depend on thread scheduling: the same scene, spp and seed give bitwise-identical output, which
-scatter-based (atomic) film accumulation would not. Passes bound the wavefront size; sums are accumulated
-in float64 on the host. A chunk is a set of passes with its own seed; chunks merge by adding sums.
+The image renders in tiles (row bands of ``tile_rows`` rows, ~``TILE_PIXELS`` pixels), so a render holds
+one tile's sums, not the image's. Within a tile, samples are laid out pixel-major (wavefront index =
+pixel·spp + s) and reduced with ``dr.block_sum``, so sums do not depend on thread scheduling: the same
+scene, spp and seed give bitwise-identical output, which scatter-based (atomic) film accumulation would
+not. Passes bound the wavefront size (``MAX_WAVEFRONT``); sums are accumulated in float64 on the host, one
+array per column. A chunk is a set of passes with its own seed per tile; chunks merge by adding sums.
 
 Kernel compilation: Dr.Jit caches compiled kernels by the hash of their IR (in memory and on disk under
 ``~/.drjit``), so a second render of a scene with the same structure and constants skips compilation.
@@ -25,7 +27,24 @@ from worker.render.integrator import RenderContext, register
 from worker.render.rlt import integrator_class
 from worker.render.scene_compiler import CompiledScene
 
-MAX_WAVEFRONT = 1 << 20  # samples per pass: ~40 float32 outputs each stay in memory until reduced
+MAX_WAVEFRONT = 1 << 20  # samples per pass: ~60 float32 outputs each stay in memory until reduced
+TILE_PIXELS = 1 << 18
+"""Pixels per tile (row band), at least one row. A tile's float64 sums (2B + 28 columns: 188 MiB at 32
+bands) are all the per-pixel state a render holds; 4 spp per pass at 1 M samples keeps passes full."""
+
+
+def tile_rows(width: int, height: int) -> int:
+    """Rows per tile: ``TILE_PIXELS`` / width, at least 1, at most the image. A function of the image size
+    only, so a scene's tiles (and so its samples) are the same on every machine and in every process."""
+    return max(1, min(height, TILE_PIXELS // max(width, 1)))
+
+
+def tile_seed(chunk_seed: int, tile_index: int) -> int:
+    """The seed of a chunk's tile: the chunk's own for tile 0 (an image of one tile renders the samples it
+    rendered before tiling), distinct 32-bit mixes for the others."""
+    if tile_index == 0:
+        return chunk_seed
+    return (chunk_seed * 0x2C1B3C6D + tile_index * 0x297A2D39 + 0x7ED55D16) & 0xFFFFFFFF
 
 
 def pass_seed(chunk_seed: int, pass_index: int) -> int:
@@ -104,6 +123,11 @@ class Renderer:
         up -= np.dot(up, d[:, 0]) * d[:, 0]
         return (right / np.linalg.norm(right)).tolist(), (up / np.linalg.norm(up)).tolist()
 
+    def tiles(self) -> list[tuple[int, int]]:
+        """The image's tiles: row bands ``[y0, y1)`` of ``tile_rows(width, height)`` rows, top to bottom."""
+        rows = tile_rows(self.width, self.height)
+        return [(y0, min(y0 + rows, self.height)) for y0 in range(0, self.height, rows)]
+
     def render_sums(
         self,
         spp: int,
@@ -111,40 +135,82 @@ class Renderer:
         progress: Callable[[float], None] | None = None,
         should_stop: Callable[[], bool] | None = None,
     ) -> PixelSums:
-        """Per-pixel sums of ``spp`` samples per pixel with ``seed``; ``RenderCanceledError`` on stop."""
-        pixels = self.width * self.height
+        """Per-pixel sums of the whole image (every tile, stacked): ``spp`` samples per pixel with ``seed``;
+        ``RenderCanceledError`` on stop. Memory ∝ the image: large renders stream ``render_tile_sums``."""
+        tiles = self.tiles()
+        parts = []
+        for index in range(len(tiles)):
+
+            def tile_progress(fraction: float, index: int = index) -> None:
+                if progress is not None:
+                    progress((index + fraction) / len(tiles))
+
+            parts.append(self.render_tile_sums(index, spp, seed, tile_progress, should_stop))
+        return PixelSums.concatenate(parts)
+
+    def render_tile_sums(
+        self,
+        tile_index: int,
+        spp: int,
+        seed: int,
+        progress: Callable[[float], None] | None = None,
+        should_stop: Callable[[], bool] | None = None,
+    ) -> PixelSums:
+        """Per-pixel sums of tile ``tile_index`` (rows ``self.tiles()[tile_index]``), ``spp`` samples per
+        pixel. The tile's samples depend only on (``seed``, tile, pass), never on which other tiles or
+        chunks render in the same process, so tiles and chunks can run in any order or process."""
+        y0, y1 = self.tiles()[tile_index]
+        pixels = (y1 - y0) * self.width
         spp_per_pass = max(1, min(spp, MAX_WAVEFRONT // max(pixels, 1)))
-        total = None
+        seed = tile_seed(seed, tile_index)
+        # One float64 running total per column: adding per-pass columns on the host costs one pass over
+        # the tile's pixels per column, where an interleaved table cost one scatter kernel per column and
+        # pass (64 % of a 1024² render's wall time). The sums are the same float64 additions, in the same
+        # order, so they are bitwise those of the interleaved table.
+        totals: list[np.ndarray] | None = None
         done = 0
         pass_index = 0
         while done < spp:
             if should_stop is not None and should_stop():
                 raise RenderCanceledError("render stopped on request")
             count = min(spp_per_pass, spp - done)
-            table = self._render_pass(count, pass_seed(seed, pass_index))
-            total = table if total is None else total + table
-            dr.eval(total)
+            launched = self._render_pass(y0, y1, count, pass_seed(seed, pass_index))
             done += count
             pass_index += 1
+            # Reported when the pass is launched (Dr.Jit's LLVM backend runs it asynchronously), before
+            # the host copy below waits for it: progress runs at most one pass ahead of finished work,
+            # and a job shows that it renders as soon as its first pass starts, not a pass later.
             if progress is not None:
                 progress(done / spp)
+            columns = [np.asarray(column) for column in launched]
+            if totals is None:
+                totals = [column.astype(np.float64) for column in columns]
+            else:
+                for total, column in zip(totals, columns, strict=True):
+                    total += column
+        assert totals is not None
         band_count = self.compiled.bands.band_count
-        columns = np.asarray(total).reshape(self.height, self.width, -1)
+        shape = (y1 - y0, self.width)
         return PixelSums(
             sample_count=spp,
-            bands=columns[..., :band_count],
-            bands_sq=columns[..., band_count : 2 * band_count],
-            values={key: columns[..., 2 * band_count + i] for i, key in enumerate(SUM_KEYS)},
+            bands=np.stack(totals[:band_count], axis=-1).reshape(*shape, band_count),
+            bands_sq=np.stack(totals[band_count : 2 * band_count], axis=-1).reshape(*shape, band_count),
+            values={key: totals[2 * band_count + i].reshape(shape) for i, key in enumerate(SUM_KEYS)},
         )
 
-    def _render_pass(self, spp: int, seed: int) -> Any:
-        """One pass: the per-pixel sums table of ``_interleave`` (bands, bands², SUM_KEYS)."""
+    def _render_pass(self, y0: int, y1: int, spp: int, seed: int) -> list[Any]:
+        """Launch one pass over rows [y0, y1): per-pixel float32 sums of ``spp`` samples, one Dr.Jit
+        array per column (bands, bands², then ``SUM_KEYS``), being evaluated asynchronously."""
         mi = self.mi
         bands = self.compiled.bands
         width, height = self.width, self.height
-        wavefront = width * height * spp
+        wavefront = width * (y1 - y0) * spp
         index = dr.arange(mi.UInt32, wavefront)
-        pixel = index // spp
+        # Opaque: as a literal the tile's first pixel would be part of the kernel's IR, and every tile
+        # would compile its own copy of the path megakernel. The pass's spp and the image size stay
+        # literals: divisions by them compile to multiply-shift sequences, while opaque divisors made the
+        # megakernel ~5 % slower (bench_compare, Cornell 128²); a new spp per pass compiles once (~0.3 s).
+        pixel = index // spp + dr.opaque(mi.UInt32, y0 * width)
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, wavefront)
         pixel_x = mi.Float(pixel % width)
@@ -207,7 +273,8 @@ class Renderer:
         reduced = [dr.block_sum(v, spp) for v in band_values]
         reduced += [dr.block_sum(dr.square(v), spp) for v in band_values]
         reduced += [dr.block_sum(per_sample[key], spp) for key in SUM_KEYS]
-        return _interleave(mi, reduced)
+        dr.eval(reduced)  # one launch for every column's reduction
+        return reduced
 
 
 def vcz_sums(weight: Any, weighted_r: Any, direction: Any) -> dict[str, Any]:
@@ -220,18 +287,6 @@ def vcz_sums(weight: Any, weighted_r: Any, direction: Any) -> dict[str, Any]:
         for j in range(i, 3):
             terms[f"vcz_d{axis}{'xyz'[j]}"] = weight * d[i] * d[j]
     return terms
-
-
-def _interleave(mi: Any, columns: list[Any]) -> Any:
-    """One Float64 array (pixel-major, column-minor) from per-pixel Float columns (unique-index scatters)."""
-    count = len(columns)
-    pixels = dr.width(columns[0])
-    table = dr.zeros(mi.Float64, pixels * count)
-    base = dr.arange(mi.UInt32, pixels) * count
-    for column, values in enumerate(columns):
-        dr.scatter(table, mi.Float64(values), base + column)
-    dr.eval(table)
-    return table
 
 
 class RenderCanceledError(Exception):

@@ -15,6 +15,7 @@ from hgcore.artifacts.keys import job_prefix
 from hgcore.errors import InputError
 from hgcore.jobs.status import JobStatus
 from hgcore.jobs.views import JobView
+from hgcore.noise_target import NoiseTarget
 from hgcore.settings import SceneLimits
 from hgcore.store.base import ArtifactNotFoundError, validate_key
 from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
@@ -48,6 +49,10 @@ _MULTIPART_SCHEMA = {
         "spp": {"type": "integer", "minimum": 1},
         "chunks": {"type": "integer", "minimum": 1},
         "seed": {"type": "integer", "minimum": 0},
+        "integrator": {"type": "string", "enum": ["hg_path", "rlt"]},
+        "target_rel_error": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1},
+        "time_budget_s": {"type": "number", "exclusiveMinimum": 0},
+        "target_quantile": {"type": "number", "exclusiveMinimum": 0, "maximum": 1},
         "idempotency_key": {"type": "string"},
         "name": {"type": "string"},
     },
@@ -113,6 +118,9 @@ async def submit_job(request: Request, response: Response, jobs: JobsDep, princi
             principal.owner,
             priority=options.priority,
             chunks=options.chunks,
+            noise_target=NoiseTarget.from_options(
+                options.target_rel_error, options.time_budget_s, options.target_quantile
+            ),
             idempotency_key=options.idempotency_key,
             name=options.name or scene.get("name"),
             extra_files=files,

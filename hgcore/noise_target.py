@@ -1,0 +1,169 @@
+"""Noise-target rendering: add passes until a render's relative standard error meets a target, or a wall
+time budget runs out, instead of rendering a fixed spp.
+
+Two error measures, from the per-pixel sums (Σx and Σx² over N samples per pixel, ``PixelSums``):
+
+* band means (default): for band b the image mean m_b = (1/P) Σ_p x̄_pb has the variance
+  Var(m_b) = (1/P²) Σ_p s²_pb / N with s²_pb = Σx²/N − x̄² (pixels are independent), so its relative
+  standard error is e_b = √Var(m_b) / m_b; the render's error is max_b e_b over bands with light (m_b > 0).
+* luminance per pixel at a quantile q (``quantile``): e_p = √(s²_p / N) / Ȳ_p for the pixel luminance Y
+  (CIE Y, the ``luminance`` sums), over pixels with Ȳ_p > 0; the render's error is the q-quantile of e_p
+  (q = 0.5: the median pixel meets the target; q = 0.9: nine pixels in ten).
+
+Both fall as 1/√N, so after a round of N samples with error e the total that just meets E is predicted
+as N·(e/E)²; the next round renders the difference (at least N/16 so that rounds stay worth their
+overhead, at most 8N so that a lucky low early estimate cannot run away), capped by the time left at the
+rate measured so far. Each round is a chunk with the next chunk index's seed (the renderer's
+``worker.render.api.chunk_seed``), so
+the result is the same as a fixed render of those chunks: bitwise deterministic given the target (a time
+budget makes the number of rounds depend on the machine's speed, by nature).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hgcore.artifacts.pixel_sums import PixelSums
+from hgcore.errors import InputError
+
+RECORD_FIELDS = ("target_rel_error", "time_budget_s", "target_quantile")
+MIN_ROUND_FRACTION = 1 / 16
+MAX_ROUND_GROWTH = 8
+
+
+@dataclass(frozen=True)
+class NoiseTarget:
+    """What a noise-target render stops at: ``rel_error`` (relative standard error, e.g. 0.01 = 1 %),
+    ``time_budget_s`` (wall seconds for the rendering), or both (whichever comes first); ``quantile``
+    selects the per-pixel luminance measure (None: band means)."""
+
+    rel_error: float | None = None
+    time_budget_s: float | None = None
+    quantile: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.quantile is not None:
+            if self.rel_error is None:
+                raise InputError("target_quantile: needs target_rel_error")
+            if not 0 < self.quantile <= 1:
+                raise InputError(f"target_quantile: must be in (0, 1], got {self.quantile}")
+        if self.rel_error is None and self.time_budget_s is None:
+            raise InputError("target_rel_error: a noise target needs target_rel_error or time_budget_s")
+        if self.rel_error is not None and not (0 < self.rel_error < 1 and math.isfinite(self.rel_error)):
+            raise InputError(f"target_rel_error: must be in (0, 1), got {self.rel_error}")
+        if self.time_budget_s is not None and not (
+            self.time_budget_s > 0 and math.isfinite(self.time_budget_s)
+        ):
+            raise InputError(f"time_budget_s: must be positive, got {self.time_budget_s}")
+
+    @classmethod
+    def from_options(
+        cls, rel_error: float | None, time_budget_s: float | None, quantile: float | None
+    ) -> NoiseTarget | None:
+        """The target of a request's options, or None when it asks for none (a fixed-spp render)."""
+        if rel_error is None and time_budget_s is None and quantile is None:
+            return None
+        return cls(rel_error, time_budget_s, quantile)
+
+    def record_fields(self) -> dict[str, str]:
+        """The target as a job record's text fields (absent parts: empty)."""
+        return {
+            name: "" if value is None else repr(float(value))
+            for name, value in zip(
+                RECORD_FIELDS, (self.rel_error, self.time_budget_s, self.quantile), strict=True
+            )
+        }
+
+    @classmethod
+    def from_record(cls, record: dict[str, str]) -> NoiseTarget | None:
+        """The target of a job record (``record_fields``), or None for a fixed-spp job."""
+        values = [float(record[name]) if record.get(name) else None for name in RECORD_FIELDS]
+        return cls.from_options(*values)
+
+    @property
+    def metric(self) -> str:
+        return "band_mean" if self.quantile is None else "luminance_quantile"
+
+
+def band_rel_errors(sums: PixelSums) -> np.ndarray:
+    """e_b, the relative standard error of each band's image mean (0 for a band without light)."""
+    count = float(sums.sample_count)
+    mean = sums.bands / count
+    variance_of_mean = np.maximum(sums.bands_sq / count - mean**2, 0.0) / count
+    pixels = mean.shape[0] * mean.shape[1]
+    image_mean = mean.sum(axis=(0, 1)) / pixels
+    image_std = np.sqrt(variance_of_mean.sum(axis=(0, 1))) / pixels
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(image_mean > 0, image_std / image_mean, 0.0)
+
+
+def luminance_rel_error(sums: PixelSums, quantile: float) -> float:
+    """The ``quantile`` of the per-pixel luminance relative standard error over lit pixels (0 if none)."""
+    count = float(sums.sample_count)
+    mean = sums.values["luminance"] / count
+    variance_of_mean = np.maximum(sums.values["luminance_sq"] / count - mean**2, 0.0) / count
+    lit = mean > 0
+    if not lit.any():
+        return 0.0
+    return float(np.quantile(np.sqrt(variance_of_mean[lit]) / mean[lit], quantile))
+
+
+def achieved_error(target: NoiseTarget, sums: PixelSums) -> float:
+    """The render's error in ``target``'s measure (module docstring)."""
+    if target.quantile is not None:
+        return luminance_rel_error(sums, target.quantile)
+    return float(band_rel_errors(sums).max(initial=0.0))
+
+
+def next_round_spp(
+    target: NoiseTarget, spp_done: int, error: float, seconds_done: float, elapsed_s: float, max_spp: int
+) -> int:
+    """Samples per pixel of the next round (0: stop). ``seconds_done``: render time of the ``spp_done``
+    samples so far; ``elapsed_s``: wall time since the render started (the budget's clock); ``max_spp``:
+    the most samples per pixel a render may have in all."""
+    if target.rel_error is not None:
+        if error <= target.rel_error:
+            return 0
+        wanted = math.ceil(spp_done * (error / target.rel_error) ** 2) - spp_done
+        wanted = min(max(wanted, math.ceil(spp_done * MIN_ROUND_FRACTION), 1), MAX_ROUND_GROWTH * spp_done)
+    else:
+        wanted = MAX_ROUND_GROWTH * spp_done
+    if target.time_budget_s is not None:
+        remaining_s = target.time_budget_s - elapsed_s
+        seconds_per_spp = seconds_done / spp_done if spp_done else 0.0
+        if seconds_per_spp > 0:
+            wanted = min(wanted, int(remaining_s / seconds_per_spp))
+        elif remaining_s <= 0:
+            wanted = 0
+    return max(0, min(wanted, max_spp - spp_done))
+
+
+def stop_reason(target: NoiseTarget, error: float, spp_done: int, max_spp: int) -> str:
+    """Why the rounds ended: ``target_met``, ``max_spp`` or ``time_budget``."""
+    if target.rel_error is not None and error <= target.rel_error:
+        return "target_met"
+    return "max_spp" if spp_done >= max_spp else "time_budget"
+
+
+def summary_block(
+    target: NoiseTarget, sums: PixelSums, rounds: list[dict[str, Any]], reason: str
+) -> dict[str, Any]:
+    """The ``noise_target`` block of ``summary.json``: the request, the achieved error in its measure and
+    per band, whether it was met, why the rounds stopped and each round's spp, seconds and error."""
+    error = achieved_error(target, sums)
+    return {
+        "target_rel_error": target.rel_error,
+        "time_budget_s": target.time_budget_s,
+        "target_quantile": target.quantile,
+        "metric": target.metric,
+        "achieved_rel_error": error,
+        "band_rel_error": band_rel_errors(sums).tolist(),
+        "met": target.rel_error is not None and error <= target.rel_error,
+        "stop_reason": reason,
+        "spp": sums.sample_count,
+        "rounds": rounds,
+    }

@@ -1,0 +1,150 @@
+"""Tiled rendering: bitwise equality of every way a render's tiles and chunks can travel (tile-major in
+one process, chunk-major with previews, chunk partials merged as the service does), row-streamed partials
+and EXRs, and the tile plan itself."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import worker.render.renderer as renderer_module
+from hgcore.artifacts.exr import ArtifactFormatError, exr_scanline_writer, read_exr
+from hgcore.artifacts.pixel_sums import (
+    SUM_KEYS,
+    PartialReader,
+    PixelSums,
+    partial_writer,
+    read_partial,
+    write_partial,
+)
+from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
+from worker.render.api import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
+from worker.render.renderer import tile_rows
+
+
+def all_channels(out_dir: Path) -> dict[str, np.ndarray]:
+    image, variance = read_exr(out_dir / "image.exr"), read_exr(out_dir / "variance.exr")
+    return {**image.channels, **{f"variance/{k}": v for k, v in variance.channels.items()}}
+
+
+def assert_bitwise_equal(a: Path, b: Path) -> None:
+    channels_a, channels_b = all_channels(a), all_channels(b)
+    assert list(channels_a) == list(channels_b)
+    differing = [name for name in channels_a if not np.array_equal(channels_a[name], channels_b[name])]
+    assert differing == []
+
+
+@pytest.fixture
+def small_tiles(monkeypatch: pytest.MonkeyPatch) -> int:
+    """Tiles of 3 rows on a 20-pixel-wide image: 7 tiles (the last one of 2 rows)."""
+    monkeypatch.setattr(renderer_module, "TILE_PIXELS", 60)
+    return 3
+
+
+@pytest.fixture
+def scene() -> dict:
+    return plane_under_source(D65_SPHERE_SOURCE, size_px=20, spp=6)
+
+
+def test_tile_plan_covers_the_image_in_row_bands(scene: dict, small_tiles: int) -> None:
+    assert tile_rows(20, 20) == small_tiles
+    assert tile_rows(1 << 20, 4) == 1  # never fewer than one row
+    assert tile_rows(8, 4) == 4  # never more than the image
+    from worker.render.api import as_scene
+
+    tiles = renderer_for(as_scene(scene)).tiles()
+    assert tiles[0] == (0, 3) and tiles[-1] == (18, 20)
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(tiles))
+
+
+def test_tile_major_chunk_major_and_merged_partials_are_bitwise_equal(
+    scene: dict, small_tiles: int, tmp_path: Path
+) -> None:
+    tile_major = render_scene(scene, tmp_path / "tile_major", chunks=3)
+    previews: list[int] = []
+    render_scene(
+        scene, tmp_path / "chunk_major", chunks=3, on_chunk=lambda s: previews.append(s.sample_count)
+    )
+    assert previews == [2, 4, 6]
+    paths = []
+    for chunk in plan_chunks(6, 3, scene["film"].get("seed", 0)):
+        path = tmp_path / "partials" / f"{chunk.index}.npz"
+        result = render_chunk(scene, chunk, path)
+        assert result["samples"] == 2 * 20 * 20
+        paths.append(path)
+    merged = merge_chunks(scene, list(reversed(paths)), tmp_path / "merged")  # order: by chunk index
+    assert tile_major["spp"] == merged["spp"] == 6
+    assert_bitwise_equal(tmp_path / "tile_major", tmp_path / "chunk_major")
+    assert_bitwise_equal(tmp_path / "tile_major", tmp_path / "merged")
+    assert tile_major["coherence"] == merged["coherence"]
+
+
+def test_tiles_render_distinct_samples_with_the_same_expectation(
+    scene: dict, small_tiles: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Tiles have their own seeds; the image mean agrees with an untiled render within its MC error."""
+    render_scene(scene, tmp_path / "tiled", spp=32)
+    monkeypatch.setattr(renderer_module, "TILE_PIXELS", 1 << 18)
+    render_scene(scene, tmp_path / "whole", spp=32)
+    tiled, whole = all_channels(tmp_path / "tiled"), all_channels(tmp_path / "whole")
+    band = next(name for name in tiled if name.startswith("S0."))
+    assert not np.array_equal(tiled[band][3:], whole[band][3:])  # rows below the first tile differ
+    assert np.array_equal(tiled[band][:3], whole[band][:3])  # tile 0 keeps the chunk's own seed
+    # Standard error of the image mean: √(Σ variance of the pixel means)/P, for each render.
+    pixels = tiled[band].size
+    sigma = np.sqrt(tiled[f"variance/{band}"].sum() + whole[f"variance/{band}"].sum()) / pixels
+    assert abs(tiled[band].mean() - whole[band].mean()) < 4 * sigma
+
+
+def test_partials_stream_by_rows_and_round_like_in_memory_chunks(tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    shape = (7, 5)
+    sums = PixelSums(
+        3,
+        rng.random((*shape, 4)) * 1e3,
+        rng.random((*shape, 4)) * 1e6,
+        {key: rng.random(shape) for key in SUM_KEYS},
+    )
+    path = tmp_path / "p.npz"
+    with partial_writer(path, 5, 7, 4) as writer:
+        writer.write_rows(sums.row_slice(0, 4))
+        writer.write_rows(sums.row_slice(4, 7))
+        writer.finish(3, 1.25, 2, 99)
+    reader = PartialReader(path)
+    assert (reader.sample_count, reader.seconds, reader.chunk_index, reader.seed) == (3, 1.25, 2, 99)
+    rounded = sums.rounded()
+    assert np.array_equal(reader.rows(2, 6).bands_sq, rounded.bands_sq[2:6])
+    assert np.array_equal(reader.rows(6, 7).values["vcz_dyz"], rounded.values["vcz_dyz"][6:7])
+    assert not np.array_equal(rounded.bands, sums.bands)  # float32 rounding did happen
+    write_partial(tmp_path / "q.npz", sums, 1.0, 0, 0)
+    whole, seconds = read_partial(tmp_path / "q.npz")
+    assert seconds == 1.0 and np.array_equal(whole.values["depth"], rounded.values["depth"])
+    assert sorted(np.load(path).files) == [
+        "band_count",
+        "chunk_index",
+        "sample_count",
+        "seconds",
+        "seed",
+        "sums",
+    ]
+
+
+def test_an_unfinished_partial_or_exr_leaves_no_file(tmp_path: Path) -> None:
+    sums = PixelSums(1, np.ones((2, 3, 1)), np.ones((2, 3, 1)), {k: np.ones((2, 3)) for k in SUM_KEYS})
+    with pytest.raises(ValueError, match="rows written"), partial_writer(tmp_path / "p.npz", 3, 4, 1) as w:
+        w.write_rows(sums)
+        w.finish(1, 0.0, 0, 0)  # 2 of 4 rows
+    with (
+        pytest.raises(ArtifactFormatError, match="in order"),
+        exr_scanline_writer(tmp_path / "x.exr", 3, 4, ["R"], {}) as exr,
+    ):
+        exr.write_rows(2, [np.zeros((2, 3))])  # rows 0-1 skipped
+    with (
+        pytest.raises(ArtifactFormatError, match="cannot be written"),
+        exr_scanline_writer(tmp_path / "y.exr", 3, 4, ["R"], {}) as exr,
+    ):
+        exr.write_rows(0, [np.zeros((2, 3))])  # the block ends with rows 2-3 missing
+    assert list(tmp_path.iterdir()) == []
