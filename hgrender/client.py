@@ -115,7 +115,8 @@ class HgrenderClient:
 
     def submit(self, scene: dict[str, Any] | Path, **options: Any) -> dict[str, Any]:
         """Submit a scene dict or file (.json, or a USD file/bundle sent as multipart); ``options`` are
-        ``priority``, ``spp``, ``chunks``, ``seed``, ``idempotency_key``, ``name``."""
+        ``priority``, ``spp``, ``chunks``, ``seed``, ``idempotency_key``, ``name``, ``integrator``,
+        ``target_rel_error``, ``time_budget_s``, ``target_quantile`` (the API's job options)."""
         options = {k: v for k, v in options.items() if v is not None}
         if isinstance(scene, dict):
             return self._json("POST", "/v1/jobs", json={"scene": scene, **options})

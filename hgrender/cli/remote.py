@@ -17,6 +17,7 @@ from typing import Any
 from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.connection import ServiceTarget, add_client_options
 from hgrender.cli.progress import ProgressDisplay
+from hgrender.cli.render import add_quality_options
 from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TEV_DEFAULT, TevImage, tev_address
 from hgrender.client import ApiError
 
@@ -49,6 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     submit.add_argument("--bands", type=positive_int, default=None, help="spectral bands (JSON scenes)")
     submit.add_argument("--name", default=None, help="label shown in listings (default: the scene's)")
     submit.add_argument("--priority", choices=("high", "normal", "low"), default="normal", help="queue")
+    add_quality_options(submit)
     submit.add_argument(
         "--idempotency-key", default=None, help="repeating a submission with this key returns the first job"
     )
@@ -140,6 +142,10 @@ def submit_command(args: argparse.Namespace) -> int:
             seed=args.seed,
             idempotency_key=args.idempotency_key,
             name=args.name,
+            integrator=args.integrator,
+            target_rel_error=args.target_rel_error,
+            time_budget_s=args.time_budget_s,
+            target_quantile=args.target_quantile,
         )
         print(created["id"], flush=True)
         if not args.wait:

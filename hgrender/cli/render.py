@@ -26,16 +26,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="random seed (overrides film.seed)")
     parser.add_argument("--modes", type=int, help="HG transverse modes 1..16 (overrides film.modes)")
     parser.add_argument(
-        "--integrator",
-        choices=("hg_path", "rlt"),
-        help="hg_path: partially coherent transport (PLT); rlt: the radiometric baseline, a coherent "
-        "plane wave per sample (overrides film.integrator)",
-    )
-    parser.add_argument(
         "--chunks",
         type=positive_int,
         default=None,
         help=f"render in K chunks and merge (default 1; with --tev {TEV_DEFAULT_CHUNKS})",
+    )
+    add_quality_options(parser)
+    parser.add_argument(
+        "--variant",
+        choices=("auto", "llvm_ad_spectral", "cuda_ad_spectral"),
+        help="Mitsuba variant (default: HGRENDER_VARIANT or auto)",
+    )
+    parser.add_argument(
+        "--tev",
+        nargs="?",
+        const=DEFAULT_TEV_ADDRESS,
+        default=None,
+        type=tev_address,
+        metavar="HOST:PORT",
+        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated after every chunk",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=run)
+
+
+def add_quality_options(parser: argparse.ArgumentParser) -> None:
+    """The integrator and noise-target options, shared by ``render`` and ``submit`` (job options)."""
+    parser.add_argument(
+        "--integrator",
+        choices=("hg_path", "rlt"),
+        help="hg_path: partially coherent transport (PLT); rlt: the radiometric baseline, a coherent "
+        "plane wave per sample (overrides film.integrator)",
     )
     parser.add_argument(
         "--target-rel-error",
@@ -57,22 +78,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="Q",
         help="measure --target-rel-error per pixel (luminance) at this quantile of the pixels, in (0, 1]",
     )
-    parser.add_argument(
-        "--variant",
-        choices=("auto", "llvm_ad_spectral", "cuda_ad_spectral"),
-        help="Mitsuba variant (default: HGRENDER_VARIANT or auto)",
-    )
-    parser.add_argument(
-        "--tev",
-        nargs="?",
-        const=DEFAULT_TEV_ADDRESS,
-        default=None,
-        type=tev_address,
-        metavar="HOST:PORT",
-        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated after every chunk",
-    )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.set_defaults(handler=run)
 
 
 def load_scene_file(path: Path) -> tuple[dict, Path | None]:

@@ -232,3 +232,21 @@ def test_another_web_server_is_not_taken_for_the_api(tmp_path: Path) -> None:
         f"answer for GET /v1/jobs/{JOB_ID}; set the service's base URL, e.g. http://127.0.0.1:8000, with "
         "--url or HGRENDER_URL"
     ]
+
+
+def test_submit_passes_the_integrator_and_noise_target_options(served: Served, tmp_path: Path) -> None:
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(tiny_scene(size_px=8, spp=2)))
+    result = run(
+        "submit", str(path), "--wait", "--integrator", "rlt", "--target-rel-error", "0.2",
+        "--time-budget-s", "60", HGRENDER_URL=served.base_url, HGRENDER_TOKEN=served.token,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    job_id = result.stdout.splitlines()[0]
+    view = served.client.get(job_id)
+    assert view["noise_target"]["target_rel_error"] == 0.2
+    assert view["noise_target"]["time_budget_s"] == 60
+    summary = json.loads(served.client.download(job_id, "summary.json", tmp_path / "s.json").read_text())
+    assert summary["integrator"] == "rlt"
+    assert summary["noise_target"]["met"] is True
+    assert summary["noise_target"]["achieved_rel_error"] <= 0.2
