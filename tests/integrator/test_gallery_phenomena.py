@@ -165,6 +165,14 @@ def chromatic_spread(scene: dict, tmp_path: Path, tag: str) -> tuple[float, floa
     return spread, float(d.std(ddof=1) / math.sqrt(d.size)) / (2.0 * spread)
 
 
+def bare_silver(scene: dict) -> dict:
+    """``scene`` with the coated shell replaced by rough silver of the same roughness: no film."""
+    film = scene["materials"]["coated_silver"]
+    keys = ("roughness_rms_um", "correlation_length_um", "psd", "psd_exponent")
+    bare = {"type": "rough_conductor", "conductor": "Ag", **{key: film[key] for key in keys}}
+    return {**scene, "materials": {**scene["materials"], "coated_silver": bare}}
+
+
 @pytest.mark.slow
 def test_sphere_source_shows_the_film_colours_across_the_highlight(tmp_path: Path) -> None:
     """Fig. 7 (left): the film's colour follows its phase 2 n_f τ cos θ_t, and θ_t changes across the rough
@@ -174,13 +182,68 @@ def test_sphere_source_shows_the_film_colours_across_the_highlight(tmp_path: Pat
     both by more than 4 standard errors (Monte Carlo, from a second seed: ``chromatic_spread``)."""
     scene = example("fig7_thin_film_sphere_light", width=96, height=96, spp=64)
     coated, coated_error = chromatic_spread(scene, tmp_path, "coated")
-    film = scene["materials"]["coated_silver"]
-    bare = {key: film[key] for key in ("roughness_rms_um", "correlation_length_um", "psd", "psd_exponent")}
-    scene["materials"]["coated_silver"] = {"type": "rough_conductor", "conductor": "Ag", **bare}
-    silver, silver_error = chromatic_spread(scene, tmp_path, "bare")
+    silver, silver_error = chromatic_spread(bare_silver(scene), tmp_path, "bare")
 
     assert coated > LAB_JND + 4.0 * coated_error
     assert coated - silver > 4.0 * math.hypot(coated_error, silver_error)
+
+
+@pytest.mark.slow
+def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_its_axis(
+    tmp_path: Path,
+) -> None:
+    """Fig. 7 (right), the paper's dotted red line: the film's colour survives where the normal is
+    perpendicular to the tube and fades where it tilts along it.
+
+    Measure: per 2×2 bin of the lit shell, the CIELAB (a*, b*) distance between the coated render and bare
+    rough silver rendered with the same seed (same paths, so the lobe's colour and most of the noise
+    cancel): the film's own colour. Eq. 18 scales the fringe terms by V = μ at the beams' separation τ·n
+    (transverse part); along the tube μ = exp(−½ (τ n_x/ℓ₂)²) (Gaussian-equivalent VCZ, ℓ₂ measured in
+    the EXR), across it ℓ₁ ≫ τ, and under the sphere V ≈ 1 everywhere. So the cylinder/sphere ratio of
+    the film's colour is ≈ 1 on the crest and falls with |n_x|: at the boundary |n_x| = 0.3 the
+    prediction is V_b = exp(−½ (0.3 τ/ℓ₂)²) (0.56 here). Asserted: the crest's ratio (|n_x| < 0.15) is
+    above V_b, the flanks' (|n_x| ≥ 0.3) below it, each by 4 standard errors of its bins."""
+    size_px, bin_px = 96, 2
+    departures = {}
+    for kind in ("sphere", "cylinder"):
+        name = f"fig7_thin_film_{kind}_light"
+        scene = example(name, width=size_px, height=size_px, spp=64)
+        chromaticity = {}
+        for tag, variant in (("coated", scene), ("bare", bare_silver(scene))):
+            out = tmp_path / f"{kind}_{tag}"
+            render_scene(variant, out, seed=3)
+            chromaticity[tag] = highlight_chromaticity(out, bin_px=bin_px, floor=0.02)
+        (coated, lit_coated), (bare, lit_bare) = chromaticity["coated"], chromaticity["bare"]
+        departures[kind] = (np.linalg.norm(coated - bare, axis=-1), lit_coated & lit_bare)
+    # The camera and the shell are the same in both scenes: |n_x| per bin and ℓ₂ from the tube's render.
+    image = read_exr(tmp_path / "cylinder_coated" / "image.exr")
+    bins_per_side = size_px // bin_px
+    nx = (
+        np.abs(image.channels["normal.X"])
+        .reshape(bins_per_side, bin_px, bins_per_side, bin_px)
+        .mean(axis=(1, 3))
+    )
+    luminance = image.rgb @ REC709
+    shell = image.stack([f"albedo.{c}" for c in "RGB"]).mean(axis=-1) > 0.3
+    lit_px = shell & (luminance > 0.05 * np.percentile(luminance[shell], 99))
+    l2_m = float(np.median(image.channels["coherence.l2_um"][lit_px])) * 1e-6
+    tau_m = scene["materials"]["coated_silver"]["film_thickness_um"] * 1e-6
+    boundary_visibility = math.exp(-0.5 * (0.3 * tau_m / l2_m) ** 2)
+    lit = departures["sphere"][1] & departures["cylinder"][1]
+    for band, low, high in (("crest", 0.0, 0.15), ("flanks", 0.3, 1.0)):
+        bins = lit & (nx >= low) & (nx < high)
+        assert bins.sum() >= 10, band
+        means, errors = {}, {}
+        for kind, (departure, _) in departures.items():
+            means[kind] = float(departure[bins].mean())
+            errors[kind] = float(departure[bins].std(ddof=1)) / math.sqrt(bins.sum())
+        ratio = means["cylinder"] / means["sphere"]
+        error = ratio * math.hypot(errors["cylinder"] / means["cylinder"], errors["sphere"] / means["sphere"])
+        if band == "crest":
+            assert means["cylinder"] > LAB_JND + 4.0 * errors["cylinder"]
+            assert ratio > boundary_visibility + 4.0 * error, (ratio, error, boundary_visibility)
+        else:
+            assert ratio < boundary_visibility - 4.0 * error, (ratio, error, boundary_visibility)
 
 
 @pytest.mark.slow
