@@ -60,11 +60,12 @@ GALLERY: tuple[GalleryEntry, ...] = (
         "spectrum (exponent 1.2, ℓc 0.5 µm), whose long tails light the whole back of the shell at "
         "incidence angles from near-normal to grazing, so the film's phase sweeps across what is lit: a "
         "cyan-white core, a pale green-olive ring around it and a lavender-grey front flank. Those are the "
-        "film's colours (bare rough silver under the same light is a uniform grey: chromaticity spread "
-        "2.9 vs 6.9 CIELAB units, tests/integrator/test_gallery_phenomena.py), and they are pastel by "
-        "physics: a lossless film over a near-perfect reflector keeps R within ≈ 0.87–0.99, so across all "
-        "angles the colour moves by at most ΔE₀₀ ≈ 12 (n 2.0–2.4 near 0.3 µm maximise it; a lower index "
-        "sweeps the phase faster but halves the fringe depth). The sphere's coherence (ℓ ≈ 4 µm, as "
+        "film's colours (bare rough silver under the same light is a warm grey throughout: chromaticity "
+        "spread 2.9 vs 6.9 CIELAB units, tests/integrator/test_gallery_phenomena.py), and they are pastel "
+        "by physics: over near-perfectly reflecting silver a lossless film's dips are shallow and narrow "
+        "(R 0.73–0.97 over 400–700 nm at normal incidence), so across all angles the colour moves by at "
+        "most ΔE₀₀ ≈ 12 (n 2.0–2.4 near 0.3 µm maximise it; a lower index sweeps the phase faster but "
+        "its fringes are shallower, |r₀₁| = (n−1)/(n+1)). The sphere's coherence (ℓ ≈ 4 µm, as "
         "measured) dwarfs the film's ~0.1 µm shear, so the fringes are fully visible.",
         "image",
     ),
