@@ -109,6 +109,143 @@ def coherence(out: Path) -> dict[str, np.ndarray]:
     return channels
 
 
+#: CIELAB distance of a just-noticeable colour difference (Sharma 2003, "Digital Color Imaging Handbook").
+LAB_JND = 2.3
+
+
+def highlight_chromaticity(out: Path, bin_px: int, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """(a*, b*) of each bin_px² bin of the lit coated shell, and the bins' mask over the binned grid.
+
+    Bins wholly on the shell — the pixels whose albedo AOV exceeds 0.3: silver's is ≈ 0.9 (its per-pixel
+    value scatters with the sampled wavelengths, 0.6–1.3), the backdrop's 0.08 — whose luminance exceeds
+    ``floor`` × the 99th percentile of those bins. Each bin's XYZ is scaled to Y = ½ (L* 76) before CIELAB
+    (D65 white): only its chromaticity counts, not where it sits in the highlight's fall-off — a colour
+    band, not a shading."""
+    from hgcore.colour import linear_srgb_to_xyz, xyz_to_lab
+
+    image = read_exr(out / "image.exr")
+    rgb = image.rgb.astype(np.float64)
+    albedo = image.stack([f"albedo.{c}" for c in "RGB"])
+    luminance = rgb @ REC709
+    material = albedo.mean(axis=-1) > 0.3
+    rows, columns = (size // bin_px for size in luminance.shape)
+
+    def binned(x: np.ndarray) -> np.ndarray:
+        x = x[: rows * bin_px, : columns * bin_px]
+        return x.reshape(rows, bin_px, columns, bin_px, *x.shape[2:]).mean(axis=(1, 3))
+
+    whole = binned(material.astype(np.float64)) == 1.0
+    rgb_bins = binned(rgb)
+    bin_luminance = rgb_bins @ REC709
+    lit = whole & (bin_luminance > floor * np.percentile(bin_luminance[whole], 99))
+    xyz = linear_srgb_to_xyz(rgb_bins)
+    xyz = 0.5 * xyz / np.maximum(xyz[..., 1:2], 1e-30)
+    return xyz_to_lab(xyz, linear_srgb_to_xyz(np.ones(3)))[..., 1:], lit
+
+
+def chromatic_spread(scene: dict, tmp_path: Path, tag: str) -> tuple[float, float]:
+    """(spread, standard error): the RMS CIELAB (a*, b*) distance of the lit bins' chromaticities from
+    their mean with the Monte Carlo noise taken out, from two renders of ``scene`` with different seeds.
+
+    With A, B the two renders' bin chromaticities and s² a bin's noise variance in one, E|A − B|² = 2s² and
+    their mean M carries s²/2, so each bin contributes d = |M − ⟨M⟩|² − |A − B|²/4 with E d = its true
+    squared distance: spread² = ⟨d⟩. The bins' noise is independent (disjoint pixels), so ⟨d⟩'s standard
+    error is std(d)/√N and the spread's, by the delta method, that over 2·spread."""
+    chromaticities = []
+    for seed in (1, 2):
+        out = tmp_path / f"{tag}_{seed}"
+        render_scene(scene, out, seed=seed)
+        chromaticities.append(highlight_chromaticity(out, bin_px=2, floor=0.02))
+    (a, lit_a), (b, lit_b) = chromaticities
+    lit = lit_a & lit_b
+    assert lit.sum() >= 30, tag
+    mean = 0.5 * (a[lit] + b[lit])
+    d = np.sum((mean - mean.mean(axis=0)) ** 2, axis=-1) - np.sum((a[lit] - b[lit]) ** 2, axis=-1) / 4.0
+    spread = math.sqrt(max(float(d.mean()), 1e-12))
+    return spread, float(d.std(ddof=1) / math.sqrt(d.size)) / (2.0 * spread)
+
+
+def bare_silver(scene: dict) -> dict:
+    """``scene`` with the coated shell replaced by rough silver of the same roughness: no film."""
+    film = scene["materials"]["coated_silver"]
+    keys = ("roughness_rms_um", "correlation_length_um", "psd", "psd_exponent")
+    bare = {"type": "rough_conductor", "conductor": "Ag", **{key: film[key] for key in keys}}
+    return {**scene, "materials": {**scene["materials"], "coated_silver": bare}}
+
+
+@pytest.mark.slow
+def test_sphere_source_shows_the_film_colours_across_the_highlight(tmp_path: Path) -> None:
+    """Fig. 7 (left): the film's colour follows its phase 2 n_f τ cos θ_t, and θ_t changes across the rough
+    highlight, so the coated shell's lit part changes hue from place to place; the same shell in bare rough
+    silver (same roughness, same light, no film) shows the lobe's own shading colour only. Asserted: the
+    coated shell's chromaticity spread is above the just-noticeable difference, above the bare shell's, and
+    both by more than 4 standard errors (Monte Carlo, from a second seed: ``chromatic_spread``)."""
+    scene = example("fig7_thin_film_sphere_light", width=96, height=96, spp=64)
+    coated, coated_error = chromatic_spread(scene, tmp_path, "coated")
+    silver, silver_error = chromatic_spread(bare_silver(scene), tmp_path, "bare")
+
+    assert coated > LAB_JND + 4.0 * coated_error
+    assert coated - silver > 4.0 * math.hypot(coated_error, silver_error)
+
+
+@pytest.mark.slow
+def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_its_axis(
+    tmp_path: Path,
+) -> None:
+    """Fig. 7 (right), the paper's dotted red line: the film's colour survives where the normal is
+    perpendicular to the tube and fades where it tilts along it.
+
+    Measure: per 2×2 bin of the lit shell, the CIELAB (a*, b*) distance between the coated render and bare
+    rough silver rendered with the same seed (same paths, so the lobe's colour and most of the noise
+    cancel): the film's own colour. Eq. 18 scales the fringe terms by V = μ at the beams' separation τ·n
+    (transverse part); along the tube μ = exp(−½ (τ n_x/ℓ₂)²) (Gaussian-equivalent VCZ, ℓ₂ measured in
+    the EXR), across it ℓ₁ ≫ τ, and under the sphere V ≈ 1 everywhere. So the cylinder/sphere ratio of
+    the film's colour is ≈ 1 on the crest and falls with |n_x|: at the boundary |n_x| = 0.3 the
+    prediction is V_b = exp(−½ (0.3 τ/ℓ₂)²) (0.56 here). Asserted: the crest's ratio (|n_x| < 0.15) is
+    above V_b, the flanks' (|n_x| ≥ 0.3) below it, each by 4 standard errors of its bins."""
+    size_px, bin_px = 96, 2
+    departures = {}
+    for kind in ("sphere", "cylinder"):
+        name = f"fig7_thin_film_{kind}_light"
+        scene = example(name, width=size_px, height=size_px, spp=64)
+        chromaticity = {}
+        for tag, variant in (("coated", scene), ("bare", bare_silver(scene))):
+            out = tmp_path / f"{kind}_{tag}"
+            render_scene(variant, out, seed=3)
+            chromaticity[tag] = highlight_chromaticity(out, bin_px=bin_px, floor=0.02)
+        (coated, lit_coated), (bare, lit_bare) = chromaticity["coated"], chromaticity["bare"]
+        departures[kind] = (np.linalg.norm(coated - bare, axis=-1), lit_coated & lit_bare)
+    # The camera and the shell are the same in both scenes: |n_x| per bin and ℓ₂ from the tube's render.
+    image = read_exr(tmp_path / "cylinder_coated" / "image.exr")
+    bins_per_side = size_px // bin_px
+    nx = (
+        np.abs(image.channels["normal.X"])
+        .reshape(bins_per_side, bin_px, bins_per_side, bin_px)
+        .mean(axis=(1, 3))
+    )
+    luminance = image.rgb @ REC709
+    shell = image.stack([f"albedo.{c}" for c in "RGB"]).mean(axis=-1) > 0.3
+    lit_px = shell & (luminance > 0.05 * np.percentile(luminance[shell], 99))
+    l2_m = float(np.median(image.channels["coherence.l2_um"][lit_px])) * 1e-6
+    tau_m = scene["materials"]["coated_silver"]["film_thickness_um"] * 1e-6
+    boundary_visibility = math.exp(-0.5 * (0.3 * tau_m / l2_m) ** 2)
+    lit = departures["sphere"][1] & departures["cylinder"][1]
+    for band, low, high in (("crest", 0.0, 0.15), ("flanks", 0.3, 1.0)):
+        bins = lit & (nx >= low) & (nx < high)
+        assert bins.sum() >= 10, band
+        means, errors = {}, {}
+        for kind, (departure, _) in departures.items():
+            means[kind] = float(departure[bins].mean())
+            errors[kind] = float(departure[bins].std(ddof=1)) / math.sqrt(bins.sum())
+        ratio = means["cylinder"] / means["sphere"]
+        error = ratio * math.hypot(errors["cylinder"] / means["cylinder"], errors["sphere"] / means["sphere"])
+        if band == "crest":
+            assert means["cylinder"] > LAB_JND + 4.0 * errors["cylinder"]
+            assert ratio > boundary_visibility + 4.0 * error, (ratio, error, boundary_visibility)
+        else:
+            assert ratio < boundary_visibility - 4.0 * error, (ratio, error, boundary_visibility)
+
+
 @pytest.mark.slow
 def test_cylinder_source_coherence_is_short_along_its_axis_only(tmp_path: Path) -> None:
     """Fig. 7: on the lit rim the tube (length L) gives ℓ₂ = r·√12/(k·L) (a uniform strip's VCZ,

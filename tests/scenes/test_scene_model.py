@@ -11,10 +11,13 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.thin_film import film_shear
 from hgcore.settings import SceneLimits
 from schemas import EXAMPLES_DIR, SceneError, validate_scene, validate_scene_json
 from schemas.export import SCHEMA_PATH, render_schema_text, scene_json_schema
@@ -123,9 +126,20 @@ def test_fig7_gallery_pair_differs_only_in_the_emitter_shape() -> None:
     centre = [(a + b) / 2 for a, b in zip(cylinder_light.p0_m, cylinder_light.p1_m, strict=True)]
     assert centre == pytest.approx(sphere_light.center_m)
     assert (sphere_light.radius_m, cylinder_light.radius_m) == (0.006, 0.001)
-    # Twice the paper's 20 cm: the gallery's 0.4 µm film (for low-order colours) shears the field by
-    # τ sin θ ≈ 0.26 µm only, so the tube's short coherence r√12/(kL) must be ≈ 0.2 µm at r = 0.28 m.
-    assert math.dist(cylinder_light.p0_m, cylinder_light.p1_m) == pytest.approx(0.4, rel=1e-12)
+    # Eq. 18's fringes need the incident field coherent across the film's shear, 2τ·tanθ_t·cosθ_i
+    # transverse (thin_film.film_shear; 0.13 µm at 45° for the gallery's 0.30 µm, n 2.4 film): the sphere's
+    # ℓ = 2r/(ka) must exceed it and the tube's short-axis ℓ₂ = r√12/(kL) fall below it (r: source to shell).
+    film = sphere_scene.materials["coated_silver"]
+    k_per_m = 2.0 * math.pi / 550e-9
+    incident = np.array([math.sqrt(0.5), 0.0, -math.sqrt(0.5)])  # 45° onto the normal +z
+    shear = np.array(
+        film_shear((0.0, 0.0, 1.0), tuple(incident), film.film_thickness_um * 1e-6, film.film_ior, 1.0, NUMPY)
+    )
+    shear_m = float(np.linalg.norm(shear - (shear @ incident) * incident))
+    r_m = math.dist(sphere_light.center_m, sphere_scene.shapes[0].center_m)
+    length_m = math.dist(cylinder_light.p0_m, cylinder_light.p1_m)
+    assert 2.0 * r_m / (k_per_m * sphere_light.radius_m) > 10.0 * shear_m
+    assert r_m * math.sqrt(12.0) / (k_per_m * length_m) < shear_m
 
 
 def test_committed_json_schema_is_current() -> None:
