@@ -12,9 +12,9 @@ For each scene of :data:`SCENES` (the Fig. 7 sphere-source shell and the Fig. 8 
   samples are a prefix of the 4096-spp run and the whole sequence costs one 4096-spp render. One chunk
   size because the renderer compiles a kernel per spp (≈ 0.8 s each at 64²); at 64² a 16-spp chunk
   costs what 1/16 of a 256-spp one does (0.11 s vs 2.3 s measured), so the chunking adds no overhead.
-  The time of level n is the render time of its chunks (``render_chunk_sums`` wall clock); one warm-up
-  chunk per integrator compiles the kernels first and is reported separately (``compile_s``), so the
-  times are those of a warm renderer.
+  The time of level n is the render time of its chunks (scene load plus ``Renderer.render_sums``, wall
+  clock); one warm-up chunk per integrator compiles the kernels first and is reported separately
+  (``compile_s``), so the times are those of a warm renderer.
 * the **errors** of each level against the reference: ΔE₀₀ per pixel (``service.image_metrics``: band
   radiances → XYZ → CIELAB at the exposure that maps the reference's 99th-percentile luminance to white,
   the regression runs' and the compare view's rule), its mean and 95th percentile; and per band
@@ -81,10 +81,11 @@ def bench_scene(name: str, resolution_px: int, integrator: str) -> dict[str, Any
 
 def render_sums(scene: dict[str, Any], spp: int, seed: int) -> tuple[PixelSums, float]:
     """One chunk of ``spp`` samples per pixel with ``seed``: its sums and wall-clock seconds."""
-    from worker.render.api import ChunkSpec, render_chunk_sums
+    from worker.render.api import as_scene, renderer_for
 
-    rendered = render_chunk_sums(scene, ChunkSpec(0, spp, seed))
-    return rendered.sums, rendered.seconds
+    start = time.perf_counter()
+    sums = renderer_for(as_scene(scene)).render_sums(spp, seed)  # scene load included, as a chunk's time
+    return sums, time.perf_counter() - start
 
 
 def chunk_seed(base: int, index: int) -> int:
