@@ -17,7 +17,8 @@ leaves a *pending* record, resolved at the next non-specular vertex or emitter h
   vertex (Θ is kept and r grows through Dirac interactions — §5 "Perfectly specular reflectors");
 * ``frame_x``/``frame_y``: the transverse frame of the pending vertex's incident beam, reflected through
   the chain so that the source's Σ⊥ lands in that vertex's frame;
-* ``film_separation``: for a thin-film vertex, the separation τ·n̂ (m) between the film's two interfaces,
+* ``film_separation``: for a thin-film vertex, the film shear s (m) between successive beams
+  (``hgcore.optics.thin_film.film_shear``, 2τ tan θ_t in the plane of incidence),
   also carried through the chain, and its partially-coherent reflectance terms (linear in the visibilities).
 
 At resolution the source is the emitter (whole emitter, BRIEF) or a non-specular surface: a *secondary*
@@ -45,6 +46,7 @@ import drjit as dr
 from hgcore.artifacts.layout import K_REFERENCE_PER_M, BandLayout
 from hgcore.optics import sources
 from hgcore.optics.frames import transverse_frame_components
+from hgcore.optics.thin_film import film_shear
 from worker.mitsuba_setup import load_mitsuba
 from worker.render import materials as mat
 from worker.render.bsdfs import (
@@ -157,7 +159,7 @@ class PendingFilm:
 
     pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
     transmitted: mi.Bool = field(default_factory=lambda: mi.Bool(False))
-    # τ·n̂ (m) between the film's interfaces, carried through the specular chain like the frame
+    # the film shear s (m) between successive beams, carried through the specular chain like the frame
     separation: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
     position: mi.Point3f = field(default_factory=lambda: mi.Point3f(0.0))
@@ -457,6 +459,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         wo_world: mi.Vector3f,
         continue_path: mi.Bool,
         film_passthrough: mi.Bool,
+        wavelengths: mi.Spectrum,
         record: PendingRecord,
         film: PendingFilm,
         first_vertex: FirstVertex,
@@ -486,7 +489,17 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             is_film = new_record & self.kernels.is_kind(vertex.kind, mat.INTERFERENCE_KINDS)
             film.pending = dr.select(new_record, is_film, film.pending)
             thickness = self.kernels.param(vertex.material, mat.FILM_THICKNESS_M)
-            film.separation = dr.select(is_film, vertex.frame.n * thickness, film.separation)
+            # The shear between successive beams (docs/physics_interactions.md §3) for light arriving along
+            # −wo: from the substrate (wo.z < 0; a transmitting film's frame is not flipped) the incident
+            # index is the substrate's, else the exterior's (hero wavelength).
+            incident_ior = dr.select(
+                sampled.wo.z < 0.0,
+                self.kernels.params.spectrum(vertex.material, mat.ETA_ID, wavelengths)[0],
+                self.kernels.param(vertex.material, mat.EXTERIOR_IOR),
+            )
+            film_ior = self.kernels.params.spectrum(vertex.material, mat.FILM_IOR_ID, wavelengths)[0]
+            shear = film_shear(vertex.frame.n, -wo_world, thickness, film_ior, incident_ior, OPS)
+            film.separation = dr.select(is_film, mi.Vector3f(*shear), film.separation)
             film.material = dr.select(is_film, vertex.material, film.material)
             film.position = dr.select(is_film, vertex.si.p, film.position)
             film.normal = dr.select(is_film, vertex.frame.n, film.normal)
@@ -686,7 +699,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             path.beta = dr.select(continue_path, path.beta * bs.weight, 0.0)
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             self._start_or_carry(
-                vertex, bs, wo_world, continue_path, film_passthrough, record, film, first_vertex
+                vertex, bs, wo_world, continue_path, film_passthrough, wavelengths, record, film, first_vertex
             )
 
             path.prev_si = si

@@ -1,8 +1,9 @@
 """Thin film (Eq. 18) on a rough conductor or dielectric substrate.
 
 The film is the rough interface of Eq. 15 (``rough_conductor``: specular part and lobe) whose reflectance
-is the P-beam partially coherent sum R(V) = R_incoherent + Σ_d V_d·X_d, V_d = μ(d·τ·n̂) the visibility of
-the incident light at the d-th beam's shear (``VisibilityModel``). Sampling uses the incoherent part
+is the P-beam partially coherent sum R(V) = R_incoherent + Σ_d V_d·X_d, V_d = μ(d·s) the visibility of
+the incident light at the d-th beam's shear s (``hgcore.optics.thin_film.film_shear``: 2τ tan θ_t in the
+plane of incidence, docs/physics_interactions.md §3) (``VisibilityModel``). Sampling uses the incoherent part
 R_incoherent and returns the terms (``FilmSample``); the integrator rescales the throughput by
 R(V)/R_incoherent once the path has reached the light's source and its coherence is known.
 
@@ -21,6 +22,7 @@ from hgcore.optics.fresnel import fresnel_dielectric
 from hgcore.optics.thin_film import (
     combine_reflectance_terms,
     film_amplitudes,
+    film_shear,
     reflectance_terms,
     transmission_terms,
 )
@@ -72,7 +74,8 @@ def film_reflectance(
     wavelengths: mi.Spectrum,
 ) -> mi.Spectrum:
     """R(V) of the partially coherent multi-beam sum (Eq. 18 for P = 2), V_d = μ(d·``separation_world``)
-    of the light described by ``coherence``; ``separation_world`` is τ·n̂ (m) between the interfaces."""
+    of the light described by ``coherence``; ``separation_world`` is the film shear s (m) between successive
+    beams."""
     visibilities = [
         visibility.at(coherence, separation_world * separation, wavelengths)
         for separation in range(1, len(terms))
@@ -106,8 +109,15 @@ class ThinFilm(RoughConductor):
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Float]:
         terms = film_terms(self.params, point.material, wo_phase.z, point.wavelengths)
+        # Direct light reaches the film from the exterior side (``eval_domain``): the shear of light
+        # arriving along −wo_phase with the exterior's index (``hgcore.optics.thin_film.film_shear``).
         thickness_m = self.params.param(point.material, mat.FILM_THICKNESS_M)
-        separation = point.frame.n * thickness_m
+        film_ior = self.params.spectrum(point.material, mat.FILM_IOR_ID, point.wavelengths)[0]
+        exterior = self.params.param(point.material, mat.EXTERIOR_IOR)
+        light_world = point.frame.to_world(wo_phase)
+        separation = mi.Vector3f(
+            *film_shear(point.frame.n, -light_world, thickness_m, film_ior, exterior, OPS)
+        )
         reflectance = film_reflectance(
             terms, self.params.visibility, coherence, separation, point.wavelengths
         )
