@@ -1,7 +1,8 @@
 """``hg_path``: a spectral path tracer that carries the coherence of light in Hermite-Gauss space.
 
 Estimator. Unidirectional path tracing from the camera with next-event estimation and MIS (balance
-heuristic, hero-wavelength pdfs, see ``worker.render.bsdfs``), Russian roulette from ``rr_depth``, and
+heuristic; hero-wavelength MIS per path, Wilkie et al. 2014 §4, docs/integrator.md), Russian roulette
+from ``rr_depth``, and
 Mitsuba's ``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination); as in prb.py the
 roulette's survival probability is min(max β·η², 0.95), η the product of the refractions' relative indices,
 so the radiance factors 1/η² of refraction are not mistaken for absorption. Emitter surfaces absorb.
@@ -57,6 +58,7 @@ from worker.render.bsdfs import (
     VisibilityModel,
     film_reflectance,
 )
+from worker.render.bsdfs.lobes import mean_over_wavelengths
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect
 
@@ -130,7 +132,9 @@ class PathState:
     # Product of the relative indices η of the refractions so far: β·η² is the throughput without the
     # radiance factors 1/η², which Russian roulette must not mistake for absorption (prb.py).
     eta: mi.Float = field(default_factory=lambda: mi.Float(1.0))
-    collapsed: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # hero wavelength only (dispersion)
+    # Path-level hero-wavelength MIS (docs/integrator.md): ρ_k = r_k/mean_h r_h, where
+    # r_k = Π_v p_k(v)/Π_v p_hero(v) is the path's density had λ_k been the hero relative to the hero's own.
+    hero_ratio: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(1.0))
     depth: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
     # the previous vertex, for MIS of emission reached by material sampling
     prev_si: mi.SurfaceInteraction3f = field(default_factory=lambda: dr.zeros(mi.SurfaceInteraction3f))
@@ -628,12 +632,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 sampler.next_1d(continue_path),
                 sampler.next_2d(continue_path),
                 continue_path,
-                path.collapsed,
             )
             wo_world = frame.to_world(bs.wo)
-            # A Dirac refraction through a dispersive medium leaves the hero wavelength only (bsdfs).
-            refracted = continue_path & bs.delta & (wi.z * bs.wo.z < 0)
-            path.collapsed |= refracted & (kernels.param(material, mat.DISPERSIVE) > 0.5)
             # A film on glass reflecting or refracting specularly keeps a pending record's coherence, like
             # smooth glass (the coated ball's far side passes on the light it transmits); its own
             # interference then uses the incoherent sum it was sampled with.
@@ -685,7 +685,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             bsdf_value, bsdf_pdf = kernels.eval_pdf(
                 material, wi, wo_eval, wavelengths, nee_coherence, frame, do_nee, wo_phase=wo_centre
             )
-            mis_em = dr.select(ds_em.delta | nee_only, 1.0, mis_weight(ds_em.pdf, bsdf_pdf))
+            # Hero MIS: the material strategy's density is mean_k ρ_k p_k, the light's mean_k ρ_k p_L = p_L.
+            material_pdf = mean_over_wavelengths(path.hero_ratio * bsdf_pdf)
+            mis_em = dr.select(ds_em.delta | nee_only, 1.0, mis_weight(ds_em.pdf, material_pdf))
             direct = dr.select(do_nee, path.beta * bsdf_value * em_weight * mis_em, 0.0)
             path.L += direct
             weight_direct = _luminance(y_weights, direct)
@@ -696,14 +698,24 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             sums.add(dr.select(counts_indirect, weight_direct, 0.0), first_vertex.indirect)
 
             # ---------------------- Update the path; start or carry the pending record -----------
-            path.beta = dr.select(continue_path, path.beta * bs.weight, 0.0)
+            # Path-level hero MIS: β_j = t_j/mean_k r_k (t_j = Π f_j/Π p_hero) advances by f_j/p_eff with
+            # p_eff = mean_k ρ_k p_k(v) = p_ref·mean_k ρ_k q_k, and ρ_k by p_k/p_eff (normalised again).
+            ratio_step = mean_over_wavelengths(path.hero_ratio * bs.pdf_ratios)
+            sampled_pdf = mean_over_wavelengths(
+                path.hero_ratio * bs.pdf
+            )  # before ρ is advanced: MIS of the next hit
+            advance = continue_path & (ratio_step > 0.0)
+            path.beta = dr.select(advance, path.beta * bs.weight / dr.maximum(ratio_step, 1e-30), 0.0)
+            path.hero_ratio = dr.select(
+                advance, path.hero_ratio * bs.pdf_ratios / dr.maximum(ratio_step, 1e-30), path.hero_ratio
+            )
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             self._start_or_carry(
                 vertex, bs, wo_world, continue_path, film_passthrough, wavelengths, record, film, first_vertex
             )
 
             path.prev_si = si
-            path.prev_pdf = bs.pdf
+            path.prev_pdf = sampled_pdf
             path.prev_delta = bs.delta
             # Emission a NEE-only lobe reaches was counted by next-event estimation already.
             path.prev_skip_emission = dr.select(nonspecular, nee_only, False) & ~bs.delta

@@ -107,7 +107,7 @@ class ThinFilm(RoughConductor):
 
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
-    ) -> tuple[mi.Spectrum, mi.Float]:
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
         terms = film_terms(self.params, point.material, wo_phase.z, point.wavelengths)
         # Direct light reaches the film from the exterior side (``eval_domain``): the shear of light
         # arriving along −wo_phase with the exterior's index (``hgcore.optics.thin_film.film_shear``).
@@ -157,11 +157,15 @@ class ThinFilm(RoughConductor):
         inner_weight = reflectance / dr.maximum(reflect_probability, 1e-12)
         # transmission: specular refraction with T/T_hero and the radiance factor (n_camera/n_light)²
         transmittance = 1.0 - reflectance
-        t_weight = transmittance / dr.maximum(1.0 - reflect_probability, 1e-12) * dr.square(dr.rcp(eta_ti))
-        t_weight = params.hero_collapse(t_weight, material, ~point.collapsed)
+        t_ratios = transmittance / dr.maximum(1.0 - reflect_probability, 1e-12)
+        t_weight = t_ratios * dr.square(dr.rcp(eta_ti))
+        t_weight, t_ratios = params.hero_collapse(t_weight, t_ratios, material, mi.Bool(True))
+        # Hero k reflects with R_k (then, outside, samples the rough film's lobe: its own ratios).
+        r_ratios = dr.select(outside, inner_weight * lobe.pdf_ratios, inner_weight)
         wo = dr.select(reflect, dr.select(outside, lobe.wo, mi.reflect(wi)), refract(wi, eta_ti, cos_t))
         weight = dr.select(reflect, dr.select(outside, r_weight, inner_weight), t_weight)
-        pdf = dr.select(reflect & outside, lobe.pdf, 1.0)
+        ratios = dr.select(reflect, r_ratios, t_ratios)
+        pdf = dr.select(reflect & outside, lobe.pdf, mi.Spectrum(1.0))
         delta = dr.select(reflect & outside, lobe.delta, True)
         no_interference = [mi.Spectrum(1.0 if slot == 0 else 0.0) for slot in range(len(terms))]
         inner_terms = [dr.select(total_internal, a, b) for a, b in zip(no_interference, terms, strict=True)]
@@ -172,4 +176,4 @@ class ThinFilm(RoughConductor):
             for a, b in zip(transmission_terms(terms), reflected_terms, strict=True)
         ]
         eta_sampled = dr.select(transmitted, eta_ti, 1.0)
-        return MaterialSample(wo, weight, pdf, delta, eta_sampled, FilmSample(chosen, transmitted))
+        return MaterialSample(wo, weight, pdf, delta, eta_sampled, FilmSample(chosen, transmitted), ratios)
