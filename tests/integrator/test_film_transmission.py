@@ -30,9 +30,8 @@ from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.thin_film import (
     combine_reflectance_terms,
-    film_amplitudes,
+    film_reflectance_terms,
     gaussian_visibilities,
-    reflectance_terms,
     transmission_terms,
 )
 from schemas import build
@@ -90,15 +89,13 @@ def expected_band_values(sphere_radius_m: float, edges_nm: np.ndarray) -> np.nda
         wavelengths_m = np.linspace(low, high, intervals + 1) * 1e-9
         cos_i = np.full_like(wavelengths_m, math.cos(math.radians(ANGLE_DEG)))
         substrate = ComplexPair(np.full_like(wavelengths_m, SUBSTRATE_IOR), np.zeros_like(wavelengths_m))
-        amplitudes = film_amplitudes(
+        terms = film_reflectance_terms(
             cos_i, wavelengths_m, THICKNESS_M, FILM_IOR, substrate, 1.0, BEAMS, NUMPY
         )
         k = 2 * math.pi / wavelengths_m
         first = np.exp(-0.5 * (k / DISTANCE_M) ** 2 * SHEAR_TRANSVERSE_M**2 * sphere_radius_m**2 / 4)
         visibilities = gaussian_visibilities(first, BEAMS - 1, NUMPY)
-        transmittance = combine_reflectance_terms(
-            transmission_terms(reflectance_terms(amplitudes)), visibilities
-        )
+        transmittance = combine_reflectance_terms(transmission_terms(terms), visibilities)
         radiance = transmittance / SUBSTRATE_IOR**2
         step = wavelengths_m[1] - wavelengths_m[0]
         simpson = np.ones_like(radiance)

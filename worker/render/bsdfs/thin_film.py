@@ -20,10 +20,9 @@ import mitsuba as mi
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_dielectric
 from hgcore.optics.thin_film import (
-    combine_reflectance_terms,
-    film_amplitudes,
+    bounded_reflectance,
+    film_reflectance_terms,
     film_shear,
-    reflectance_terms,
     transmission_terms,
 )
 from worker.render import materials as mat
@@ -43,7 +42,8 @@ from worker.render.bsdfs.rough_conductor import RoughConductor
 def film_terms(
     params: MaterialParams, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum
 ) -> list[mi.Spectrum]:
-    """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i."""
+    """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i, with every
+    beam (``hgcore.optics.thin_film.film_reflectance_terms``)."""
     exterior = params.param(material, mat.EXTERIOR_IOR)
     thickness_m = params.param(material, mat.FILM_THICKNESS_M)
     film_ior = params.spectrum(material, mat.FILM_IOR_ID, wavelengths)
@@ -51,7 +51,8 @@ def film_terms(
     substrate_k = params.spectrum(material, mat.KAPPA_ID, wavelengths)
     terms = [mi.Spectrum(0.0) for _ in range(params.max_beams)]
     for j in range(len(wavelengths)):
-        amplitudes = film_amplitudes(
+        # every beam, the separations d ≥ P − 1 together (hgcore.optics.thin_film: "All beams")
+        per_wavelength = film_reflectance_terms(
             cos_i,
             wavelengths[j] * 1e-9,
             thickness_m,
@@ -61,7 +62,7 @@ def film_terms(
             params.max_beams,
             OPS,
         )
-        for slot, term in enumerate(reflectance_terms(amplitudes)):
+        for slot, term in enumerate(per_wavelength):
             terms[slot][j] = term
     return terms
 
@@ -73,14 +74,13 @@ def film_reflectance(
     separation_world: mi.Vector3f,
     wavelengths: mi.Spectrum,
 ) -> mi.Spectrum:
-    """R(V) of the partially coherent multi-beam sum (Eq. 18 for P = 2), V_d = μ(d·``separation_world``)
-    of the light described by ``coherence``; ``separation_world`` is the film shear s (m) between successive
-    beams."""
+    """R(V) ∈ [0, 1] of the partially coherent sum of every beam, V_d = μ(d·``separation_world``) of the light
+    described by ``coherence``; ``separation_world`` is the film shear s (m) between successive beams."""
     visibilities = [
         visibility.at(coherence, separation_world * separation, wavelengths)
         for separation in range(1, len(terms))
     ]
-    return dr.maximum(combine_reflectance_terms(terms, visibilities), 0.0)
+    return bounded_reflectance(terms, visibilities, OPS)
 
 
 class ThinFilm(RoughConductor):
