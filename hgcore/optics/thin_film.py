@@ -92,6 +92,29 @@ def beam_amplitudes(
     return amplitudes
 
 
+def _film_interfaces(
+    cos_theta_i: Any,
+    wavelength_m: Any,
+    thickness_m: Any,
+    film_ior: Any,
+    substrate_eta: ComplexPair,
+    exterior_ior: Any,
+    ops: ArrayOps,
+) -> tuple[Any, Any, ComplexPair]:
+    """The film's top and bottom interface amplitudes (``fresnel.interface_amplitudes``) and the round-trip
+    phase factor e^{iδ}, δ = 2 k q_1 τ (arguments as in :func:`film_amplitudes`)."""
+    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
+    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
+    q_0 = ComplexPair.real(exterior_ior * cos_i)
+    q_1 = normal_factor(film_ior, invariant_sq, ops)
+    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
+    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
+    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
+    wavenumber_per_m = 2.0 * math.pi / wavelength_m
+    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
+    return top, bottom, film_phase
+
+
 def film_amplitudes(
     cos_theta_i: Any,
     wavelength_m: Any,
@@ -107,15 +130,9 @@ def film_amplitudes(
     ``cos_theta_i`` is the cosine of the angle of incidence in the exterior medium (taken by magnitude);
     ``substrate_eta`` the substrate's complex index (``ComplexPair``; κ = 0 for a dielectric).
     """
-    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
-    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
-    q_0 = ComplexPair.real(exterior_ior * cos_i)
-    q_1 = normal_factor(film_ior, invariant_sq, ops)
-    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
-    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
-    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
-    wavenumber_per_m = 2.0 * math.pi / wavelength_m
-    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
+    top, bottom, film_phase = _film_interfaces(
+        cos_theta_i, wavelength_m, thickness_m, film_ior, substrate_eta, exterior_ior, ops
+    )
     return (
         beam_amplitudes(top.r_s, bottom.r_s, film_phase, beam_count),
         beam_amplitudes(top.r_p, bottom.r_p, film_phase, beam_count),
@@ -162,15 +179,9 @@ def film_reflectance_terms(
             cos_theta_i, wavelength_m, thickness_m, film_ior, substrate_eta, exterior_ior, beam_count, ops
         )
         return reflectance_terms(amplitudes)
-    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
-    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
-    q_0 = ComplexPair.real(exterior_ior * cos_i)
-    q_1 = normal_factor(film_ior, invariant_sq, ops)
-    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
-    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
-    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
-    wavenumber_per_m = 2.0 * math.pi / wavelength_m
-    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
+    top, bottom, film_phase = _film_interfaces(
+        cos_theta_i, wavelength_m, thickness_m, film_ior, substrate_eta, exterior_ior, ops
+    )
     terms: list[Any] = [0.0] * beam_count
     for r_01, r_12 in ((top.r_s, bottom.r_s), (top.r_p, bottom.r_p)):
         first = (1.0 - r_01 * r_01) * (film_phase * r_12)  # A = t01 t10 r12 e^{iδ}

@@ -182,14 +182,7 @@ class RoughDielectric(Material):
         )
         # Russian roulette divides out the radiance factor of a transmission (η of the hero wavelength).
         eta = dr.select(reflect, 1.0, eta_hero)
+        lobe = (lobe_value, lobe_pdfs, lobe_valid)
         return specular_or_lobe(
-            specular,
-            specular_probability,
-            wo,
-            specular_weight,
-            lobe_value,
-            lobe_pdfs,
-            lobe_valid,
-            eta,
-            specular_ratios,
+            specular, specular_probability, wo, specular_weight, *lobe, eta, specular_ratios
         )
