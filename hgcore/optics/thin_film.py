@@ -20,6 +20,31 @@ averaged over s and p polarisation (unpolarised light). V_d = 1 for all d and P 
 formula |(r_01 + r_12 e^{iδ})/(1 + r_01 r_12 e^{iδ})|²; V_d = 0 gives the incoherent sum Σ|a_p|². The caller
 supplies V_1 … V_{P−1} (dimensionless, in [0, 1]); for a 0th-mode (Gaussian) CSD they are
 V_d = V_1^{d²} (:func:`gaussian_visibilities`). Element-wise against ``ops``: runs on NumPy and in Dr.Jit.
+
+All beams (:func:`film_reflectance_terms`, what the renderer uses). Truncating the series at P beams is
+not bounded: near grazing incidence |r_10 r_12| → 1 on a metal, the partial sums of Σ a_p e^{ipφ} overshoot
+and R exceeds 1 (7 beams on silver at 85°: R = 1.14; Eq. (18)'s two beams: up to 1.39 on silver at grazing
+incidence, V = 1). The series is geometric, so every beam can be kept: with A = t_01 t_10 r_12 e^{iδ} and
+b = r_10 r_12 e^{iδ} (a_p = A b^{p−1}, |b| < 1 for every absorbing or lossless stack short of exact
+grazing incidence),
+
+    R_incoherent = |r_01|² + |A|²/(1 − |b|²),
+    Σ_p a_{p+d} a_p* = C b^{d−1},    C = A r_01* + |A|² b/(1 − |b|²),
+
+per polarisation, so X_d = Re(C b^{d−1}) for every separation d ≥ 1. The caller knows V_1 … V_{P−1}; the
+separations d ≥ P − 1 are summed together with V_{P−1}: X_{P−1} = Re(C b^{P−2}/(1 − b)). This is exact for
+V ≡ 1 (the Airy formula, every P) and for V ≡ 0 (the infinite incoherent sum). On a metal the all-beam
+fringes are far shallower than the truncated ones: C ∝ (1 − |r_12|²) at normal incidence, and for
+|r_12| → 1 the coherent sum tends to R = 1 at every δ. For a Gaussian V_d = V_1^{d²} the tail is
+over-coherent (V_{P−1} ≥ V_d for d ≥ P); its error 2 Σ_{d≥P} (V_{P−1} − V_d) X_d vanishes in both limits
+and is largest for V_1 ≈ 0.9 near grazing incidence on silver (R ≤ 1.0016 over 0°–89.9°, 0.05–3 µm,
+n_f 1.38–2.1, P = 3–8; tests/optics/test_thin_film.py). P = 2 stays Eq. (18) as the paper writes it, the
+two-beam truncation, which scenes request explicitly to reproduce the paper (`beams: 2`); on silver its
+fringe maxima exceed 1 (up to 1.26 for 1.23 µm of n_f 1.5 at V = 1, 1.39 for 0.1 µm of n_f 2.1 near
+grazing incidence). :func:`bounded_reflectance` clips the all-beam residual so that R ∈ [0, 1] and
+T = 1 − R ≥ 0 hold for P ≥ 3 everywhere; for P = 2 it clips at 0 only (T ≥ 0: Eq. (18) stays ≤ 1 on
+glass). :func:`reflectance_terms` of :func:`film_amplitudes` is the
+explicit P-beam truncation, kept as the reference the limits are tested against.
 """
 
 from __future__ import annotations
@@ -67,6 +92,29 @@ def beam_amplitudes(
     return amplitudes
 
 
+def _film_interfaces(
+    cos_theta_i: Any,
+    wavelength_m: Any,
+    thickness_m: Any,
+    film_ior: Any,
+    substrate_eta: ComplexPair,
+    exterior_ior: Any,
+    ops: ArrayOps,
+) -> tuple[Any, Any, ComplexPair]:
+    """The film's top and bottom interface amplitudes (``fresnel.interface_amplitudes``) and the round-trip
+    phase factor e^{iδ}, δ = 2 k q_1 τ (arguments as in :func:`film_amplitudes`)."""
+    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
+    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
+    q_0 = ComplexPair.real(exterior_ior * cos_i)
+    q_1 = normal_factor(film_ior, invariant_sq, ops)
+    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
+    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
+    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
+    wavenumber_per_m = 2.0 * math.pi / wavelength_m
+    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
+    return top, bottom, film_phase
+
+
 def film_amplitudes(
     cos_theta_i: Any,
     wavelength_m: Any,
@@ -82,15 +130,9 @@ def film_amplitudes(
     ``cos_theta_i`` is the cosine of the angle of incidence in the exterior medium (taken by magnitude);
     ``substrate_eta`` the substrate's complex index (``ComplexPair``; κ = 0 for a dielectric).
     """
-    cos_i = ops.minimum(ops.abs(cos_theta_i), 1.0)
-    invariant_sq = exterior_ior * exterior_ior * (1.0 - cos_i * cos_i)
-    q_0 = ComplexPair.real(exterior_ior * cos_i)
-    q_1 = normal_factor(film_ior, invariant_sq, ops)
-    q_2 = normal_factor(substrate_eta, invariant_sq, ops)
-    top = interface_amplitudes(exterior_ior, q_0, film_ior, q_1)
-    bottom = interface_amplitudes(film_ior, q_1, substrate_eta, q_2)
-    wavenumber_per_m = 2.0 * math.pi / wavelength_m
-    film_phase = ComplexPair.exp_i(q_1 * (2.0 * wavenumber_per_m * thickness_m), ops)
+    top, bottom, film_phase = _film_interfaces(
+        cos_theta_i, wavelength_m, thickness_m, film_ior, substrate_eta, exterior_ior, ops
+    )
     return (
         beam_amplitudes(top.r_s, bottom.r_s, film_phase, beam_count),
         beam_amplitudes(top.r_p, bottom.r_p, film_phase, beam_count),
@@ -115,6 +157,52 @@ def reflectance_terms(amplitudes: tuple[list[ComplexPair], list[ComplexPair]]) -
     return terms
 
 
+def film_reflectance_terms(
+    cos_theta_i: Any,
+    wavelength_m: Any,
+    thickness_m: Any,
+    film_ior: Any,
+    substrate_eta: ComplexPair,
+    exterior_ior: Any,
+    beam_count: int,
+    ops: ArrayOps,
+) -> list[Any]:
+    """[R_incoherent, X_1, …, X_{P−1}] of the film with *every* beam (module docstring: "All beams"),
+    unpolarised, for ``beam_count`` = P ≥ 3: X_{P−1} holds all separations d ≥ P − 1. Arguments as in
+    :func:`film_amplitudes`; combine with V_1 … V_{P−1} (:func:`bounded_reflectance`): exact Airy for
+    V ≡ 1, the infinite incoherent sum for V ≡ 0. P = 2 is Eq. (18) itself, the paper's two-beam
+    truncation (:func:`reflectance_terms` of two beams), which a scene asks for explicitly.
+    """
+    if beam_count <= 2:
+        # Eq. (18) as the paper writes it: the scene asked for the two-beam truncation
+        amplitudes = film_amplitudes(
+            cos_theta_i, wavelength_m, thickness_m, film_ior, substrate_eta, exterior_ior, beam_count, ops
+        )
+        return reflectance_terms(amplitudes)
+    top, bottom, film_phase = _film_interfaces(
+        cos_theta_i, wavelength_m, thickness_m, film_ior, substrate_eta, exterior_ior, ops
+    )
+    terms: list[Any] = [0.0] * beam_count
+    for r_01, r_12 in ((top.r_s, bottom.r_s), (top.r_p, bottom.r_p)):
+        first = (1.0 - r_01 * r_01) * (film_phase * r_12)  # A = t01 t10 r12 e^{iδ}
+        bounce = -(r_01 * (film_phase * r_12))  # b = r10 r12 e^{iδ}
+        first_sq = first.abs2()
+        # 1 − |b|² > 0 for every absorbing or lossless stack short of exact grazing incidence
+        remaining = ops.maximum(1.0 - bounce.abs2(), 1e-30)
+        later_sq = first_sq / remaining  # Σ_{p≥1} |a_p|²
+        # X_d = Re(C b^{d−1}), C = A r01* + |A|² b/(1 − |b|²)
+        coefficient = first * r_01.conj() + bounce * later_sq
+        terms[0] = terms[0] + 0.5 * (r_01.abs2() + later_sq)
+        power = ComplexPair.real(1.0 + 0.0 * first_sq)  # b^{d−1}
+        for separation in range(1, beam_count - 1):
+            terms[separation] = terms[separation] + 0.5 * (coefficient * power).re
+            power = power * bounce
+        # separations d ≥ P − 1 together, with the last visibility: Σ_{d≥P−1} C b^{d−1} = C b^{P−2}/(1 − b)
+        tail = coefficient * power / (1.0 - bounce)
+        terms[beam_count - 1] = terms[beam_count - 1] + 0.5 * tail.re
+    return terms
+
+
 def transmission_terms(terms: Sequence[Any]) -> list[Any]:
     """[T_incoherent, −X_1, …, −X_{P−1}]: the transmittance T(V) = 1 − R(V) of a lossless film on a
     dielectric in the same linear-in-V form as :func:`reflectance_terms` (combine with
@@ -125,7 +213,8 @@ def transmission_terms(terms: Sequence[Any]) -> list[Any]:
     Checks (tests/optics/test_thin_film.py): under full coherence and P → ∞ it is the Airy transmittance
     (q_s/q_0)|t_01 t_12 e^{iδ/2}/(1 + r_01 r_12 e^{iδ})|², incoherently the sum Σ_p (q_s/q_0)|t_p|² of the
     transmitted beams, both computed from the transmitted amplitudes directly. With P beams the neglected
-    ones (≤ the truncation bound of the module docstring) go to T instead of being lost.
+    ones (≤ the truncation bound of the module docstring) go to T instead of being lost; with
+    :func:`film_reflectance_terms` there are none.
     """
     return [1.0 - terms[0], *(-term for term in terms[1:])]
 
@@ -140,6 +229,18 @@ def combine_reflectance_terms(terms: Sequence[Any], visibilities: Sequence[Any])
     for term, visibility in zip(terms[1:], visibilities, strict=True):
         reflectance = reflectance + 2.0 * visibility * term
     return reflectance
+
+
+def bounded_reflectance(terms: Sequence[Any], visibilities: Sequence[Any], ops: ArrayOps) -> Any:
+    """:func:`combine_reflectance_terms` clipped to [0, 1]: a reflectance or transmittance (T = 1 − R from
+    :func:`transmission_terms`) of :func:`film_reflectance_terms`, whose over-coherent tail can exceed 1 by
+    ≤ 2e-3 (module docstring). Clipping R and T alike keeps R + T = 1. Two terms (P = 2) are Eq. (18) as
+    published, kept unclipped above so that its fringes are reproduced as the paper has them (on silver its
+    maxima exceed 1); they are clipped at 0 only."""
+    value = combine_reflectance_terms(terms, visibilities)
+    if len(terms) <= 2:
+        return ops.maximum(value, 0.0)
+    return ops.clip(value, 0.0, 1.0)
 
 
 def thin_film_reflectance(

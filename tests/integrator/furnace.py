@@ -74,20 +74,31 @@ def _read(path: Path) -> dict[str, np.ndarray]:
     return {name: values.astype(float) for name, values in read_exr(path).channels.items()}
 
 
-def furnace_ratio(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> tuple[float, float]:
-    """(mean object radiance / wall radiance, its standard error) over the pixels that see the object.
-
-    Object pixels are those whose first hit is nearer than any wall can be (depth < 2.5 m). The standard
-    error is the pixel-to-pixel scatter over √N (conservative: it includes any real variation with angle).
-    """
+def _object_bands(scene: dict[str, Any], out_dir: Path, seed: int) -> list[np.ndarray]:
+    """Render; per band, the object pixels' radiance over the walls'. Object pixels are those whose first
+    hit is nearer than any wall can be (depth < 2.5 m)."""
     render_scene(scene, out_dir, seed=seed)
     image = _read(out_dir / "image.exr")
     bands = sorted(name for name in image if name.startswith("S0."))
     mask = image["depth"] < 2.5
     assert mask.sum() >= 20, "the object covers too few pixels"
-    values = np.mean([image[name][mask] for name in bands], axis=0)
-    error = float(np.std(values, ddof=1) / math.sqrt(values.size))
-    return float(values.mean()) / WALL_RADIANCE, error / WALL_RADIANCE
+    return [image[name][mask] / WALL_RADIANCE for name in bands]
+
+
+def _mean_and_error(values: np.ndarray) -> tuple[float, float]:
+    """Mean and its standard error from the pixel-to-pixel scatter over √N (conservative: it includes any
+    real variation with angle)."""
+    return float(values.mean()), float(np.std(values, ddof=1) / math.sqrt(values.size))
+
+
+def furnace_ratio(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> tuple[float, float]:
+    """(mean object radiance / wall radiance, its standard error), the bands averaged per pixel."""
+    return _mean_and_error(np.mean(_object_bands(scene, out_dir, seed), axis=0))
+
+
+def furnace_band_ratios(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> list[tuple[float, float]]:
+    """``furnace_ratio`` per band: biases that differ between the bands (the spectrum's ends) show here."""
+    return [_mean_and_error(values) for values in _object_bands(scene, out_dir, seed)]
 
 
 def box(half_extents_m: tuple[float, float, float]) -> dict[str, Any]:

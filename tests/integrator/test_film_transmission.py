@@ -3,8 +3,9 @@
 The camera looks at a coated glass surface at 45°; below it, inside the glass, an emitting sphere sits on
 the refracted ray at r = 0.5 m. Every camera path that refracts hits the sphere directly, so the pixel is
 L_e·T(V)/n_s² (radiance is divided by n² leaving the denser medium), with T(V) the film's partially
-coherent transmittance at 45° and V_d = V₁^{d²}, V₁ = exp(−½ (k/r)² τ² sin²θ_s R²/4) (0th mode, Σ⊥ of the
-sphere R²/4 I, the film's separation τn̂ seen across the refracted beam: τ sin θ_s). The reference evaluates
+coherent transmittance at 45° and V_d = V₁^{d²}, V₁ = exp(−½ (k/r)² |s⊥|² R²/4) (0th mode, Σ⊥ of the
+sphere R²/4 I; |s⊥| = 2τ tan θ_f cos θ_s, the film shear seen across the beam arriving from the substrate,
+n_s sin θ_s = n_f sin θ_f; ``hgcore.optics.thin_film.film_shear``). The reference evaluates
 that with ``hgcore.optics`` per wavelength and averages it over each band (Simpson, 2 nm steps); a small
 sphere (V₁ ≈ 1) and a large one (V₁ ≈ 0.27 at 550 nm) must both match, and their difference — the fringe
 contrast the partial coherence removes from the transmitted light — must be resolved.
@@ -29,9 +30,8 @@ from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.thin_film import (
     combine_reflectance_terms,
-    film_amplitudes,
+    film_reflectance_terms,
     gaussian_visibilities,
-    reflectance_terms,
     transmission_terms,
 )
 from schemas import build
@@ -45,6 +45,11 @@ ANGLE_DEG = 45.0
 DISTANCE_M = 0.5
 SIN_T = math.sin(math.radians(ANGLE_DEG)) / SUBSTRATE_IOR
 COS_T = math.sqrt(1.0 - SIN_T**2)
+# |s⊥| = 2τ tan θ_f cos θ_s: the film shear across the beam arriving from the substrate,
+# sin θ_f = sin 45°/n_f
+SHEAR_TRANSVERSE_M = (
+    2 * THICKNESS_M * math.tan(math.asin(math.sin(math.radians(ANGLE_DEG)) / FILM_IOR)) * COS_T
+)
 
 
 def scene(sphere_radius_m: float) -> dict:
@@ -84,15 +89,13 @@ def expected_band_values(sphere_radius_m: float, edges_nm: np.ndarray) -> np.nda
         wavelengths_m = np.linspace(low, high, intervals + 1) * 1e-9
         cos_i = np.full_like(wavelengths_m, math.cos(math.radians(ANGLE_DEG)))
         substrate = ComplexPair(np.full_like(wavelengths_m, SUBSTRATE_IOR), np.zeros_like(wavelengths_m))
-        amplitudes = film_amplitudes(
+        terms = film_reflectance_terms(
             cos_i, wavelengths_m, THICKNESS_M, FILM_IOR, substrate, 1.0, BEAMS, NUMPY
         )
         k = 2 * math.pi / wavelengths_m
-        first = np.exp(-0.5 * (k / DISTANCE_M) ** 2 * (THICKNESS_M * SIN_T) ** 2 * sphere_radius_m**2 / 4)
+        first = np.exp(-0.5 * (k / DISTANCE_M) ** 2 * SHEAR_TRANSVERSE_M**2 * sphere_radius_m**2 / 4)
         visibilities = gaussian_visibilities(first, BEAMS - 1, NUMPY)
-        transmittance = combine_reflectance_terms(
-            transmission_terms(reflectance_terms(amplitudes)), visibilities
-        )
+        transmittance = combine_reflectance_terms(transmission_terms(terms), visibilities)
         radiance = transmittance / SUBSTRATE_IOR**2
         step = wavelengths_m[1] - wavelengths_m[0]
         simpson = np.ones_like(radiance)

@@ -17,8 +17,10 @@ from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.sources import cylinder_covariance_components
 from hgcore.optics.thin_film import (
+    bounded_reflectance,
     combine_reflectance_terms,
     film_amplitudes,
+    film_reflectance_terms,
     film_shear,
     gaussian_visibilities,
     reflectance_terms,
@@ -298,3 +300,60 @@ def test_validation_names_parameter() -> None:
         validate_thin_film(1e-7, 1.5, 0.5)
     with pytest.raises(ValueError, match=r"^visibilities"):
         combine_reflectance_terms([0.5, 0.1, 0.01], [1.0])
+
+
+SUBSTRATES = {"Ag": 0.13 + 3.4j, "Au": 0.27 + 2.9j, "glass": 1.5 + 0j, "dense glass": 1.9 + 0j}
+GRAZING_COS = np.cos(np.radians(np.linspace(0.0, 89.9, 1000)))
+
+
+def _all_beam_terms(substrate: complex, thickness_m: float, film_ior: float, beams: int) -> list[np.ndarray]:
+    eta = ComplexPair(np.full_like(GRAZING_COS, substrate.real), np.full_like(GRAZING_COS, substrate.imag))
+    return film_reflectance_terms(GRAZING_COS, 550e-9, thickness_m, film_ior, eta, 1.0, beams, NUMPY)
+
+
+@pytest.mark.parametrize("substrate", list(SUBSTRATES))
+@pytest.mark.parametrize("beams", [2, 3, 4, 7])
+def test_every_beam_reflectance_is_bounded_at_every_angle(substrate: str, beams: int) -> None:
+    """R ∈ [0, 1] and T = 1 − R ≥ 0 at 0°–89.9° for thicknesses 0.1–3 µm and Gaussian visibilities (module
+    docstring "All beams"). The P-beam truncation this replaces exceeds 1 on silver near grazing
+    incidence (7 beams: ≥ 1.05), so the check has power; the unclipped all-beam sum (P ≥ 3) is within the
+    documented 2e-3 of [0, 1]; P = 2 is Eq. (18) itself, ≤ 1 on glass, above 1 on metals (the paper's
+    equation, reproduced as published)."""
+    for thickness_m in (0.1e-6, 0.4e-6, 1.23e-6, 3.0e-6):
+        for film_ior in (1.38, 1.5, 2.1):
+            terms = _all_beam_terms(SUBSTRATES[substrate], thickness_m, film_ior, beams)
+            for first in (0.0, 0.3, 0.6, 0.9, 0.99, 1.0):
+                visibilities = gaussian_visibilities(np.full_like(GRAZING_COS, first), beams - 1, NUMPY)
+                raw = combine_reflectance_terms(terms, visibilities)
+                if beams > 2:
+                    assert raw.min() >= -1e-12 and raw.max() <= 1.0 + 2e-3, (thickness_m, film_ior, first)
+                reflectance = bounded_reflectance(terms, visibilities, NUMPY)
+                transmittance = bounded_reflectance(transmission_terms(terms), visibilities, NUMPY)
+                assert reflectance.min() >= 0.0 and transmittance.min() >= 0.0
+                if beams > 2 or substrate in ("glass", "dense glass"):
+                    assert reflectance.max() <= 1.0
+    if substrate == "Ag" and beams == 7:
+        eta = ComplexPair(np.full_like(GRAZING_COS, 0.13), np.full_like(GRAZING_COS, 3.4))
+        truncated = thin_film_reflectance(GRAZING_COS, 550e-9, 0.4e-6, 2.1, eta, 1.0, [1.0] * 6, NUMPY)
+        assert truncated.max() > 1.05
+
+
+@pytest.mark.parametrize("substrate", list(SUBSTRATES))
+@pytest.mark.parametrize("beams", [3, 4, 6])
+def test_every_beam_limits_are_airy_and_the_incoherent_series(substrate: str, beams: int) -> None:
+    """V ≡ 1: the Airy formula for every P (no truncation error: compare test_fully_coherent_limit_is_airy's
+    bound); V ≡ 0: the infinite incoherent sum |r01|² + |t01 t10 r12|²/(1 − |r10 r12|²), from the textbook
+    amplitudes of ``_film_fresnel``; at 0°–89.9°, where |r10 r12| → 1."""
+    eta_s = SUBSTRATES[substrate]
+    for thickness_m in (0.1e-6, 1.23e-6):
+        terms = _all_beam_terms(eta_s, thickness_m, 1.45, beams)
+        coherent = combine_reflectance_terms(terms, [1.0] * (beams - 1))
+        incoherent = combine_reflectance_terms(terms, [0.0] * (beams - 1))
+        expected_coherent = _airy(GRAZING_COS, 550e-9, thickness_m, 1.0, 1.45, eta_s)
+        expected_incoherent = 0.0
+        for polarisation in ("s", "p"):
+            r01, r12, t_product, _ = _film_fresnel(GRAZING_COS, 1.0, 1.45, eta_s, polarisation)
+            series = np.abs(t_product * r12) ** 2 / (1.0 - np.abs(r01 * r12) ** 2)
+            expected_incoherent = expected_incoherent + 0.5 * (np.abs(r01) ** 2 + series)
+        np.testing.assert_allclose(coherent, expected_coherent, atol=1e-9)
+        np.testing.assert_allclose(incoherent, expected_incoherent, atol=1e-9)

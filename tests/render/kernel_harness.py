@@ -75,7 +75,9 @@ class KernelProbe:
             mi.Float(np.ascontiguousarray(uniforms[:, 2], dtype=np.float32)),
         )
         active = mi.Bool(np.ones(wi.shape[0], dtype=bool))
-        wo, weight, pdf, delta, _, _ = self.kernels.sample(material, local_wi, spectrum, u1, u2, active)
+        sampled = self.kernels.sample(material, local_wi, spectrum, u1, u2, active)
+        wo, weight, delta = sampled.wo, sampled.weight, sampled.delta
+        pdf = sum(sampled.pdf[j] for j in range(len(sampled.pdf))) / len(sampled.pdf)
         return {
             "wo": np.stack([np.asarray(wo.x), np.asarray(wo.y), np.asarray(wo.z)], axis=1).astype(float),
             "weight": np.stack([np.asarray(weight[j]) for j in range(len(weight))], axis=1).astype(float),
@@ -98,7 +100,8 @@ class KernelProbe:
         )
         frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
         active = mi.Bool(np.ones(wi.shape[0], dtype=bool))
-        value, pdf = self.kernels.eval_pdf(material, local_wi, local_wo, spectrum, coherence, frame, active)
+        value, pdfs = self.kernels.eval_pdf(material, local_wi, local_wo, spectrum, coherence, frame, active)
+        pdf = sum(pdfs[j] for j in range(len(pdfs))) / len(pdfs)  # the hero-MIS mean over the wavelengths
         return (
             np.stack([np.asarray(value[j]) for j in range(len(value))], axis=1).astype(float),
             np.asarray(pdf).astype(float),

@@ -28,7 +28,7 @@ from hgcore.optics import rough_surface
 from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_dielectric
-from hgcore.optics.thin_film import film_amplitudes, reflectance_terms
+from hgcore.optics.thin_film import film_reflectance_terms
 from tests.render.chi2 import RegularLobe, SphereGrid, direction_chi2, discrete_chi2, sidak_level
 from tests.render.kernel_harness import MaterialAdapter, material_adapter
 
@@ -118,9 +118,9 @@ def rough_glass(material: dict[str, Any], theta_deg: float, wavelength_nm: float
 
 
 def film_reflectance(material: dict[str, Any], cos_i: float, wavelength_nm: float) -> float:
-    """Incoherent multi-beam reflectance Σ_p |a_p|² of the film (what the sampler selects reflection by)."""
+    """Incoherent reflectance Σ_p |a_p|² of the film, every beam (what the sampler selects reflection by)."""
     substrate = material["substrate"]
-    amplitudes = film_amplitudes(
+    terms = film_reflectance_terms(
         np.array(cos_i),
         wavelength_nm * 1e-9,
         material["film_thickness_um"] * 1e-6,
@@ -130,7 +130,7 @@ def film_reflectance(material: dict[str, Any], cos_i: float, wavelength_nm: floa
         material.get("beams", 4),
         NUMPY,
     )
-    return float(reflectance_terms(amplitudes)[0])
+    return float(terms[0])
 
 
 def coated_glass(material: dict[str, Any], theta_deg: float, wavelength_nm: float) -> Case:

@@ -93,6 +93,25 @@ def emitter_is_rect(mi: Any, table: Any, emitter_index: Any) -> Any:
     return (kind == int(EmitterKind.RECTANGLE)) | (kind == int(EmitterKind.CYLINDER))
 
 
+def sphere_solid_angle(mi: Any, table: Any, emitter_index: Any, distance_m: Any) -> tuple[Any, Any]:
+    """(whether the emitter is a sphere seen from outside, the solid angle Ω (sr) it subtends from a
+    receiver ``distance_m`` from its centre).
+
+    Ω = 2π(1 − cos α), sin α = a/d, formed as 2π sin²α/(1 + cos α): float32 1 − cos α cancels, so Mitsuba's
+    cone pdf 1/Ω is 3 % high at a/d = 1.7e-3 (a 1 mm sphere at 0.6 m) and infinite below a/d ≈ 2.4e-4
+    (cos α rounds to 1: emitter weight 0, MIS weight ∞/∞ = NaN).
+    """
+    import drjit as dr
+
+    base = emitter_index * STRIDE
+    kind = mi.UInt32(dr.gather(mi.Float, table, base + KIND))
+    radius = dr.gather(mi.Float, table, base + RADIUS)
+    sin_sq = dr.square(radius / dr.maximum(distance_m, 1e-30))
+    outside = (kind == int(EmitterKind.SPHERE)) & (sin_sq < 1.0)
+    cos_alpha = dr.sqrt(dr.maximum(1.0 - sin_sq, 0.0))
+    return outside, 2.0 * dr.pi * sin_sq / (1.0 + cos_alpha)
+
+
 def emitter_coherence(
     mi: Any,
     table: Any,

@@ -1,7 +1,8 @@
 """``hg_path``: a spectral path tracer that carries the coherence of light in Hermite-Gauss space.
 
 Estimator. Unidirectional path tracing from the camera with next-event estimation and MIS (balance
-heuristic, hero-wavelength pdfs, see ``worker.render.bsdfs``), Russian roulette from ``rr_depth``, and
+heuristic; hero-wavelength MIS per path, Wilkie et al. 2014 §4, docs/integrator.md), Russian roulette
+from ``rr_depth``, and
 Mitsuba's ``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination); as in prb.py the
 roulette's survival probability is min(max β·η², 0.95), η the product of the refractions' relative indices,
 so the radiance factors 1/η² of refraction are not mistaken for absorption. Emitter surfaces absorb.
@@ -17,7 +18,8 @@ leaves a *pending* record, resolved at the next non-specular vertex or emitter h
   vertex (Θ is kept and r grows through Dirac interactions — §5 "Perfectly specular reflectors");
 * ``frame_x``/``frame_y``: the transverse frame of the pending vertex's incident beam, reflected through
   the chain so that the source's Σ⊥ lands in that vertex's frame;
-* ``film_separation``: for a thin-film vertex, the separation τ·n̂ (m) between the film's two interfaces,
+* ``film_separation``: for a thin-film vertex, the film shear s (m) between successive beams
+  (``hgcore.optics.thin_film.film_shear``, 2τ tan θ_t in the plane of incidence),
   also carried through the chain, and its partially-coherent reflectance terms (linear in the visibilities).
 
 At resolution the source is the emitter (whole emitter, BRIEF) or a non-specular surface: a *secondary*
@@ -45,6 +47,7 @@ import drjit as dr
 from hgcore.artifacts.layout import K_REFERENCE_PER_M, BandLayout
 from hgcore.optics import sources
 from hgcore.optics.frames import transverse_frame_components
+from hgcore.optics.thin_film import film_shear
 from worker.mitsuba_setup import load_mitsuba
 from worker.render import materials as mat
 from worker.render.bsdfs import (
@@ -55,8 +58,14 @@ from worker.render.bsdfs import (
     VisibilityModel,
     film_reflectance,
 )
+from worker.render.bsdfs.lobes import mean_over_wavelengths
 from worker.render.drjit_ops import drjit_ops
-from worker.render.emitters import emitter_coherence, emitter_direction, emitter_is_rect
+from worker.render.emitters import (
+    emitter_coherence,
+    emitter_direction,
+    emitter_is_rect,
+    sphere_solid_angle,
+)
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
 # (``load_mitsuba`` honours HGRENDER_VARIANT; ``auto`` picks cuda_ad_spectral when a GPU is usable).
@@ -128,7 +137,9 @@ class PathState:
     # Product of the relative indices η of the refractions so far: β·η² is the throughput without the
     # radiance factors 1/η², which Russian roulette must not mistake for absorption (prb.py).
     eta: mi.Float = field(default_factory=lambda: mi.Float(1.0))
-    collapsed: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # hero wavelength only (dispersion)
+    # Path-level hero-wavelength MIS (docs/integrator.md): ρ_k = r_k/mean_h r_h, where
+    # r_k = Π_v p_k(v)/Π_v p_hero(v) is the path's density had λ_k been the hero relative to the hero's own.
+    hero_ratio: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(1.0))
     depth: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
     # the previous vertex, for MIS of emission reached by material sampling
     prev_si: mi.SurfaceInteraction3f = field(default_factory=lambda: dr.zeros(mi.SurfaceInteraction3f))
@@ -157,7 +168,7 @@ class PendingFilm:
 
     pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
     transmitted: mi.Bool = field(default_factory=lambda: mi.Bool(False))
-    # τ·n̂ (m) between the film's interfaces, carried through the specular chain like the frame
+    # the film shear s (m) between successive beams, carried through the specular chain like the frame
     separation: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
     position: mi.Point3f = field(default_factory=lambda: mi.Point3f(0.0))
@@ -328,6 +339,17 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         registry_id = dr.reinterpret_array(mi.UInt32, emitter_ptr)
         return dr.gather(mi.UInt32, self.context.emitter_index, registry_id)
 
+    def _emitter_pdf(
+        self, scene: mi.Scene, mitsuba_pdf: mi.Float, em_record: mi.UInt32, distance_m: mi.Float
+    ) -> mi.Float:
+        """The solid-angle density of emitter sampling towards emitter ``em_record`` from a receiver
+        ``distance_m`` from its centre: Mitsuba's, except for spheres seen from outside, whose uniform cone
+        has the density selection/Ω with Ω from ``emitters.sphere_solid_angle`` (Mitsuba's float32 cone
+        pdf is 3 % high for a 1 mm sphere at 0.6 m and infinite below a/d ≈ 2.4e-4)."""
+        sphere, solid_angle = sphere_solid_angle(mi, self.context.emitter_flat, em_record, distance_m)
+        selection = scene.pdf_emitter(em_record, sphere)
+        return dr.select(sphere, selection / dr.maximum(solid_angle, 1e-30), mitsuba_pdf)
+
     def _screen_angle_terms(
         self, sxx: mi.Float, sxy: mi.Float, syy: mi.Float, frame_x: mi.Vector3f, frame_y: mi.Vector3f
     ) -> tuple[mi.Float, mi.Float]:
@@ -457,6 +479,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         wo_world: mi.Vector3f,
         continue_path: mi.Bool,
         film_passthrough: mi.Bool,
+        wavelengths: mi.Spectrum,
         record: PendingRecord,
         film: PendingFilm,
         first_vertex: FirstVertex,
@@ -486,7 +509,17 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             is_film = new_record & self.kernels.is_kind(vertex.kind, mat.INTERFERENCE_KINDS)
             film.pending = dr.select(new_record, is_film, film.pending)
             thickness = self.kernels.param(vertex.material, mat.FILM_THICKNESS_M)
-            film.separation = dr.select(is_film, vertex.frame.n * thickness, film.separation)
+            # The shear between successive beams (docs/physics_interactions.md §3) for light arriving along
+            # −wo: from the substrate (wo.z < 0; a transmitting film's frame is not flipped) the incident
+            # index is the substrate's, else the exterior's (hero wavelength).
+            incident_ior = dr.select(
+                sampled.wo.z < 0.0,
+                self.kernels.params.spectrum(vertex.material, mat.ETA_ID, wavelengths)[0],
+                self.kernels.param(vertex.material, mat.EXTERIOR_IOR),
+            )
+            film_ior = self.kernels.params.spectrum(vertex.material, mat.FILM_IOR_ID, wavelengths)[0]
+            shear = film_shear(vertex.frame.n, -wo_world, thickness, film_ior, incident_ior, OPS)
+            film.separation = dr.select(is_film, mi.Vector3f(*shear), film.separation)
             film.material = dr.select(is_film, vertex.material, film.material)
             film.position = dr.select(is_film, vertex.si.p, film.position)
             film.normal = dr.select(is_film, vertex.frame.n, film.normal)
@@ -615,12 +648,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 sampler.next_1d(continue_path),
                 sampler.next_2d(continue_path),
                 continue_path,
-                path.collapsed,
             )
             wo_world = frame.to_world(bs.wo)
-            # A Dirac refraction through a dispersive medium leaves the hero wavelength only (bsdfs).
-            refracted = continue_path & bs.delta & (wi.z * bs.wo.z < 0)
-            path.collapsed |= refracted & (kernels.param(material, mat.DISPERSIVE) > 0.5)
             # A film on glass reflecting or refracting specularly keeps a pending record's coherence, like
             # smooth glass (the coated ball's far side passes on the light it transmits); its own
             # interference then uses the incoherent sum it was sampled with.
@@ -643,6 +672,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # ---------------------- Emission reached by material sampling (MIS with NEE) ---------
             ds = mi.DirectionSample3f(scene, si=si, ref=path.prev_si)
             em_pdf = scene.pdf_emitter_direction(path.prev_si, ds, ~path.prev_delta)
+            hit_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, path.prev_si.p)
+            em_pdf = self._emitter_pdf(scene, em_pdf, em_record, hit_distance)
             mis = dr.select(path.prev_delta, 1.0, mis_weight(path.prev_pdf, em_pdf))
             mis = dr.select(path.prev_skip_emission, 0.0, mis)
             emitted = dr.select(hit_emitter, path.beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)
@@ -652,10 +683,17 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             # ---------------------- Emitter sampling (next-event estimation) ---------------------
             do_nee = continue_path & nonspecular
-            ds_em, em_weight = scene.sample_emitter_direction(si, nee_sample, True, do_nee)
+            ds_em, em_weight = scene.sample_emitter_direction(si, nee_sample, False, do_nee)
             do_nee &= ds_em.pdf != 0.0
             em_record_nee = self._emitter_lookup(ds_em.emitter)
             nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
+            # Spheres: Mitsuba's weight L/pdf uses its float32 cone pdf (``_emitter_pdf``); with the stable
+            # one it is L·Ω/selection. Visibility is tested here for all emitters, as Mitsuba would.
+            em_pdf_nee = self._emitter_pdf(scene, ds_em.pdf, em_record_nee, nee_r)
+            sphere_nee, _ = sphere_solid_angle(mi, self.context.emitter_flat, em_record_nee, nee_r)
+            em_radiance = ds_em.emitter.eval_direction(si, ds_em, do_nee & sphere_nee)
+            em_weight = dr.select(sphere_nee, em_radiance / dr.maximum(em_pdf_nee, 1e-30), em_weight)
+            do_nee &= ~scene.ray_test(si.spawn_ray_to(ds_em.p), do_nee)
             # The emitter's Σ⊥ matters for diagnostics at the first non-specular vertex and for
             # coherence-sensitive materials; elsewhere the symbolic branch is skipped.
             needs_nee_coherence = do_nee & (~first_vertex.seen | coherence_materials) & (not self.plane_waves)
@@ -672,7 +710,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             bsdf_value, bsdf_pdf = kernels.eval_pdf(
                 material, wi, wo_eval, wavelengths, nee_coherence, frame, do_nee, wo_phase=wo_centre
             )
-            mis_em = dr.select(ds_em.delta | nee_only, 1.0, mis_weight(ds_em.pdf, bsdf_pdf))
+            # Hero MIS: the material strategy's density is mean_k ρ_k p_k, the light's mean_k ρ_k p_L = p_L.
+            material_pdf = mean_over_wavelengths(path.hero_ratio * bsdf_pdf)
+            mis_em = dr.select(ds_em.delta | nee_only, 1.0, mis_weight(em_pdf_nee, material_pdf))
             direct = dr.select(do_nee, path.beta * bsdf_value * em_weight * mis_em, 0.0)
             path.L += direct
             weight_direct = _luminance(y_weights, direct)
@@ -683,14 +723,24 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             sums.add(dr.select(counts_indirect, weight_direct, 0.0), first_vertex.indirect)
 
             # ---------------------- Update the path; start or carry the pending record -----------
-            path.beta = dr.select(continue_path, path.beta * bs.weight, 0.0)
+            # Path-level hero MIS: β_j = t_j/mean_k r_k (t_j = Π f_j/Π p_hero) advances by f_j/p_eff with
+            # p_eff = mean_k ρ_k p_k(v) = p_ref·mean_k ρ_k q_k, and ρ_k by p_k/p_eff (normalised again).
+            ratio_step = mean_over_wavelengths(path.hero_ratio * bs.pdf_ratios)
+            sampled_pdf = mean_over_wavelengths(
+                path.hero_ratio * bs.pdf
+            )  # before ρ is advanced: MIS of the next hit
+            advance = continue_path & (ratio_step > 0.0)
+            path.beta = dr.select(advance, path.beta * bs.weight / dr.maximum(ratio_step, 1e-30), 0.0)
+            path.hero_ratio = dr.select(
+                advance, path.hero_ratio * bs.pdf_ratios / dr.maximum(ratio_step, 1e-30), path.hero_ratio
+            )
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             self._start_or_carry(
-                vertex, bs, wo_world, continue_path, film_passthrough, record, film, first_vertex
+                vertex, bs, wo_world, continue_path, film_passthrough, wavelengths, record, film, first_vertex
             )
 
             path.prev_si = si
-            path.prev_pdf = bs.pdf
+            path.prev_pdf = sampled_pdf
             path.prev_delta = bs.delta
             # Emission a NEE-only lobe reaches was counted by next-event estimation already.
             path.prev_skip_emission = dr.select(nonspecular, nee_only, False) & ~bs.delta

@@ -3,12 +3,16 @@
 Conventions (all kinds). Directions are in the local shading frame (z = normal, flipped towards the
 incident side for two-sided materials); ``wi`` points to the previous vertex (towards the camera), ``wo`` to
 the next one (towards the light); by reciprocity the formulas of ``hgcore.optics`` are evaluated with the
-light arriving along ``wo``. ``eval_pdf`` returns f·|cos θo| per wavelength and the hero-wavelength MIS
-density in solid angle — the mean over the four wavelengths of the per-wavelength sampling density, so that
-wavelength-dependent lobes (gratings, PSD lobes) combine without bias (Wilkie et al. 2014, "Hero
-wavelength spectral sampling"). ``sample`` returns a ``MaterialSample``: the weight f·|cos θo|/pdf per
-wavelength, the pdf (1 for a Dirac part), whether the part sampled is a Dirac delta, and the relative index
-η = n_transmitted/n_incident of the sampled event (1 for reflection), which Russian roulette divides out.
+light arriving along ``wo``. ``eval_pdf`` returns f·|cos θo| per wavelength and the MIS densities in
+solid angle *per wavelength*: p_k, the density with which the lobe would be sampled were λ_k the hero.
+``sample`` returns a ``MaterialSample``: the weight f_j·|cos θo|/p_ref per wavelength for a reference density
+p_ref the kind chooses (the four-wavelength mean where the lobe depends on λ, the hero's for a discrete choice
+made with the hero's probabilities), ``pdf_ratios`` q_k = p_k/p_ref with p_k the probability density of the
+sampled outcome had λ_k been the hero (discrete choices included; 0 where hero k could not have produced it,
+e.g. a dispersive refraction), the per-wavelength MIS pdfs (1 for a Dirac part), whether the part sampled is a
+Dirac delta, and the relative index η = n_transmitted/n_incident of the sampled event (1 for reflection),
+which Russian roulette divides out. The integrator combines the q_k along the path into the path-level
+hero-wavelength MIS of Wilkie et al. 2014 ("Hero wavelength spectral sampling", §4; docs/integrator.md).
 
 Coherence enters only through ``IncidentCoherence`` (Σ⊥, r and frame of the light a vertex receives) and
 ``VisibilityModel`` (μ at a separation, Eq. 18), and only for thin films and gratings (Thm 5.1(i)).
@@ -87,14 +91,16 @@ class FilmSample(NamedTuple):
 
 
 class MaterialSample(NamedTuple):
-    """One sampled scattering event (module docstring); ``film`` only from thin films."""
+    """One sampled scattering event (module docstring); ``film`` only from thin films; ``pdf_ratios``
+    q_k = p_k/p_ref (``None``: 1 for every wavelength, a sampler that does not depend on the hero)."""
 
     wo: mi.Vector3f
     weight: mi.Spectrum
-    pdf: mi.Float
+    pdf: mi.Spectrum
     delta: mi.Bool
     eta: mi.Float
     film: FilmSample | None = None
+    pdf_ratios: mi.Spectrum | None = None
 
 
 class MaterialParams:
@@ -138,29 +144,31 @@ class MaterialParams:
             result[j] = fresnel_reflectance(cos_theta, ComplexPair(eta[j], kappa[j]), OPS)
         return result
 
-    def hero_collapse(self, weight: mi.Spectrum, material: mi.UInt32, refracted: mi.Bool) -> mi.Spectrum:
-        """After a refraction through a dispersive medium only the hero wavelength's path is valid: its
-        weight gains the factor 4 (its share of the four-wavelength pdf), the others are zeroed. Once per
-        path: callers pass ``refracted & ~collapsed`` (a second factor 4 would bias the estimate 4×)."""
+    def hero_collapse(
+        self, weight: mi.Spectrum, ratios: mi.Spectrum, material: mi.UInt32, refracted: mi.Bool
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
+        """A refraction through a dispersive medium bends each wavelength differently: only the hero's
+        direction was sampled, so the other wavelengths' f is 0 there (weights zeroed) and so is the density
+        with which another hero would have produced it (q_k = 0 for k ≠ hero). The path-level MIS then
+        gives the hero its factor 4 (β_hero = t_hero/mean_k r_k with r = (1, 0, 0, 0)), once: a second
+        collapse finds r_k = 0 already."""
         collapse = refracted & (self.param(material, mat.DISPERSIVE) > 0.5)
-        result = mi.Spectrum(weight)
-        result[0] = dr.select(collapse, weight[0] * len(result), weight[0])
+        result, q = mi.Spectrum(weight), mi.Spectrum(ratios)
         for j in range(1, len(result)):
             result[j] = dr.select(collapse, 0.0, weight[j])
-        return result
+            q[j] = dr.select(collapse, 0.0, ratios[j])
+        return result, q
 
 
 class ShadingPoint(NamedTuple):
     """A vertex as a material sees it (the part of Mitsuba's SurfaceInteraction a BSDF reads): the
     material index, ``wi`` (local frame, towards the previous vertex), the path's wavelengths (nm), the
-    world-space shading frame (gratings' axes, a film's normal; sampling does not need it) and whether the
-    path already carries its hero wavelength only (``MaterialParams.hero_collapse``)."""
+    world-space shading frame (gratings' axes, a film's normal; sampling does not need it)."""
 
     material: mi.UInt32
     wi: mi.Vector3f
     wavelengths: mi.Spectrum
     frame: mi.Frame3f | None = None
-    collapsed: mi.Bool | bool = False
 
 
 class Material:
@@ -206,9 +214,9 @@ class Material:
 
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
-    ) -> tuple[mi.Spectrum, mi.Float] | None:
-        """(f·|cos θo|, hero-MIS pdf) of the non-Dirac part for light arriving along ``wo`` with the
-        coherence ``coherence``; ``None`` for a purely Dirac kind. ``wo_phase``: the direction whose
+    ) -> tuple[mi.Spectrum, mi.Spectrum] | None:
+        """(f·|cos θo|, per-wavelength MIS pdfs p_k) of the non-Dirac part for light arriving along ``wo``
+        with the coherence ``coherence``; ``None`` for a purely Dirac kind. ``wo_phase``: the direction whose
         interference phase a thin film uses (module ``thin_film``)."""
         return None
 

@@ -19,9 +19,11 @@ class Diffuse(Material):
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         direction = mi.warp.square_to_cosine_hemisphere(sample2)
         pdf = mi.warp.square_to_cosine_hemisphere_pdf(direction)
-        return MaterialSample(direction, self._reflectance(point), pdf, mi.Bool(False), mi.Float(1.0))
+        return MaterialSample(
+            direction, self._reflectance(point), mi.Spectrum(pdf), mi.Bool(False), mi.Float(1.0)
+        )
 
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
-    ) -> tuple[mi.Spectrum, mi.Float]:
-        return self._reflectance(point) * (wo.z / math.pi), wo.z / math.pi
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
+        return self._reflectance(point) * (wo.z / math.pi), mi.Spectrum(wo.z / math.pi)

@@ -107,8 +107,8 @@ class MaterialKernels:
         frame: mi.Frame3f,
         active: mi.Bool,
         wo_phase: mi.Vector3f | None = None,
-    ) -> tuple[mi.Spectrum, mi.Float]:
-        """(f·|cos θo| per wavelength, hero-MIS pdf) of the non-Dirac part for light arriving along ``wo``.
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
+        """(f·|cos θo|, MIS density p_k) per wavelength of the non-Dirac part for light arriving along ``wo``.
 
         ``frame``: the shading frame (world space); ``wo_phase`` (default ``wo``): the direction whose
         interference phase a thin film uses — for light from an emitter the direction to its centre (BRIEF:
@@ -118,7 +118,7 @@ class MaterialKernels:
         point = ShadingPoint(material, wi, wavelengths, frame)
         phase = wo if wo_phase is None else wo_phase
         value = mi.Spectrum(0.0)
-        pdf = mi.Float(0.0)
+        pdf = mi.Spectrum(0.0)
         for branch in self.branches:
             evaluated = branch.eval_pdf(point, wo, coherence, phase)
             if evaluated is None:  # a Dirac kind: nothing to evaluate
@@ -136,15 +136,15 @@ class MaterialKernels:
         sample1: mi.Float,
         sample2: mi.Point2f,
         active: mi.Bool,
-        collapsed: mi.Bool | bool = False,
     ) -> MaterialSample:
         """The next path segment (``common.MaterialSample``); ``film`` holds the thin films' terms (zero
         elsewhere) — the weight uses their incoherent part, the integrator rescales it once the incident
-        coherence is known. ``collapsed``: the path already refracted through a dispersive medium and
-        carries its hero wavelength only."""
+        coherence is known. ``pdf_ratios``: q_k of the hero-wavelength MIS (``common``), 1 where the kind's
+        sampling does not depend on the hero."""
         kind = self.kind(material)
-        point = ShadingPoint(material, wi, wavelengths, None, mi.Bool(collapsed))
-        wo, weight, pdf = mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Float(0.0)
+        point = ShadingPoint(material, wi, wavelengths)
+        wo, weight, pdf = mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Spectrum(0.0)
+        ratios = mi.Spectrum(1.0)
         delta, eta = mi.Bool(False), mi.Float(1.0)
         terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
         transmitted = mi.Bool(False)
@@ -156,9 +156,11 @@ class MaterialKernels:
             pdf = dr.select(is_this, sampled.pdf, pdf)
             delta = dr.select(is_this, sampled.delta, delta)
             eta = dr.select(is_this, sampled.eta, eta)
+            if sampled.pdf_ratios is not None:
+                ratios = dr.select(is_this, sampled.pdf_ratios, ratios)
             if sampled.film is not None:
                 transmitted = dr.select(is_this, sampled.film.transmitted, transmitted)
                 for slot, term in enumerate(sampled.film.terms):
                     terms[slot] = dr.select(is_this, term, terms[slot])
         weight = dr.select(active, weight, 0.0)
-        return MaterialSample(wo, weight, pdf, delta, eta, FilmSample(terms, transmitted))
+        return MaterialSample(wo, weight, pdf, delta, eta, FilmSample(terms, transmitted), ratios)

@@ -52,22 +52,22 @@ class Grating(Material):
 
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
-    ) -> tuple[mi.Spectrum, mi.Float]:
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
         material, wi, wavelengths = point.material, point.wi, point.wavelengths
         light = vec(self._to_grating(material, wo))
         view = vec(self._to_grating(material, wi))
         angular_cov = self._angular_covariance(material, coherence, point.frame)
         fresnel = self.params.interface_reflectance(material, wo.z, wavelengths)
         value = mi.Spectrum(0.0)
-        pdf_sum = mi.Float(0.0)
+        pdfs = mi.Spectrum(0.0)
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
             brdf = grating_model.grating_eval(
                 self.model, light, view, wavelength_m, fresnel[j], angular_cov, OPS
             )
             value[j] = brdf * wo.z
-            pdf_sum += grating_model.grating_pdf(self.model, view, light, wavelength_m, angular_cov, OPS)
-        return value, pdf_sum / len(wavelengths)
+            pdfs[j] = grating_model.grating_pdf(self.model, view, light, wavelength_m, angular_cov, OPS)
+        return value, pdfs
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         """The 0th order with probability η_00(λ_hero), else a diffraction lobe.
@@ -89,22 +89,29 @@ class Grating(Material):
         wo = dr.select(choose_specular, mi.reflect(wi), lobe_wo)
         fresnel = self.params.interface_reflectance(material, wo.z, wavelengths)
         lobe_value = mi.Spectrum(0.0)
-        pdf_sum = mi.Float(0.0)
+        # Hero k picks a lobe with 1 − η_00(λ_k) and draws it with its own density: p_k relative to the
+        # hero's selection probability, which ``specular_or_lobe`` divides by.
+        lobe_pdfs = mi.Spectrum(0.0)
         specular_weight = mi.Spectrum(0.0)
+        specular_ratios = mi.Spectrum(0.0)
         light = vec(self._to_grating(material, lobe_wo))
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
             brdf = grating_model.grating_eval(grating, light, view, wavelength_m, fresnel[j], zero_cov, OPS)
             lobe_value[j] = brdf * lobe_wo.z
-            pdf_sum += grating_model.grating_pdf(grating, view, light, wavelength_m, zero_cov, OPS)
             eta_00 = grating_model.specular_efficiency(grating, wavelength_m, OPS)
+            lobe_pdfs[j] = grating_model.grating_pdf(grating, view, light, wavelength_m, zero_cov, OPS) * (
+                (1.0 - eta_00) / dr.maximum(1.0 - specular_probability, 1e-20)
+            )
             specular_weight[j] = fresnel[j] * eta_00 / dr.maximum(specular_probability, 1e-20)
+            specular_ratios[j] = eta_00 / dr.maximum(specular_probability, 1e-20)
         return specular_or_lobe(
             choose_specular,
             specular_probability,
             wo,
             specular_weight,
             lobe_value,
-            pdf_sum / len(wavelengths),
+            lobe_pdfs,
             lobe_valid,
+            specular_ratios=specular_ratios,
         )

@@ -14,4 +14,4 @@ class Mirror(Material):
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         wi = point.wi
         reflectance = self.params.interface_reflectance(point.material, wi.z, point.wavelengths)
-        return MaterialSample(mi.reflect(wi), reflectance, mi.Float(1.0), mi.Bool(True), mi.Float(1.0))
+        return MaterialSample(mi.reflect(wi), reflectance, mi.Spectrum(1.0), mi.Bool(True), mi.Float(1.0))

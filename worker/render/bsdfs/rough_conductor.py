@@ -34,20 +34,21 @@ class RoughConductor(Material):
 
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
-    ) -> tuple[mi.Spectrum, mi.Float]:
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
         return self.lobe_eval(point, wo, self.reflectance(point, wo)[0])
 
     def lobe_eval(
         self, point: ShadingPoint, wo: mi.Vector3f, reflectance: mi.Spectrum
-    ) -> tuple[mi.Spectrum, mi.Float]:
-        """Scattered lobe value f·cos θo and hero-MIS pdf for light arriving along ``wo``.
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
+        """Scattered lobe value f·cos θo and the per-wavelength lobe densities p_k for light arriving along
+        ``wo``.
 
         Harvey–Shack's incident-side factors (1 − e^{−g}, the propagating fraction) are those of the side
         the path arrives from, ``wi``. ``reflectance`` is the caller's F (conductors: at ``wi``).
         """
         surface, wi, wavelengths = self.model, point.wi, point.wavelengths
         value = mi.Spectrum(0.0)
-        pdf_sum = mi.Float(0.0)
+        pdfs = mi.Spectrum(0.0)
         light, view = vec(wo), vec(wi)
         sin_view = dr.sqrt(dr.maximum(wi.x * wi.x + wi.y * wi.y, 0.0))
         for j in range(len(wavelengths)):
@@ -57,8 +58,8 @@ class RoughConductor(Material):
                 surface, view, light, wavelength_m, reflectance[j], OPS, fraction=fraction
             )
             value[j] = brdf * wo.z
-            pdf_sum += rough_surface.rough_reflection_pdf(surface, view, light, wavelength_m, OPS)
-        return value, pdf_sum / len(wavelengths)
+            pdfs[j] = rough_surface.rough_reflection_pdf(surface, view, light, wavelength_m, OPS)
+        return value, pdfs
 
     def _reflection_fraction(self, sin_theta: mi.Float, wavelength_nm: mi.Float) -> mi.Float:
         """Propagating fraction P of reflection in air, bilinear in ``reflection_fraction_table`` (built once
@@ -111,12 +112,12 @@ class RoughConductor(Material):
         wo = dr.select(choose_specular, mi.reflect(wi), lobe_wo)
         terms = self.reflectance(point, wo)
         reflectance = terms[0]
-        lobe_value, lobe_pdf = self.lobe_eval(point, lobe_wo, reflectance)
+        lobe_value, lobe_pdfs = self.lobe_eval(point, lobe_wo, reflectance)
         specular_weight = mi.Spectrum(0.0)
         for j in range(len(wavelengths)):
             g_j = rough_surface.roughness_exponent(surface.rms_height_m, wi.z, wavelengths[j] * 1e-9)
             specular_weight[j] = reflectance[j] * dr.exp(-g_j) / dr.maximum(specular_probability, 1e-20)
         sampled = specular_or_lobe(
-            choose_specular, specular_probability, wo, specular_weight, lobe_value, lobe_pdf, lobe_valid
+            choose_specular, specular_probability, wo, specular_weight, lobe_value, lobe_pdfs, lobe_valid
         )
         return sampled, terms

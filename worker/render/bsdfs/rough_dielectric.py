@@ -41,12 +41,13 @@ class RoughDielectric(Material):
 
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
-    ) -> tuple[mi.Spectrum, mi.Float]:
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
         return self.lobes(point, wo)
 
-    def lobes(self, point: ShadingPoint, wo: mi.Vector3f) -> tuple[mi.Spectrum, mi.Float]:
-        """f·|cos θo| and hero-MIS pdf of the scattered lobes (light arriving along wo). The pdf is that of
-        ``sample`` (selection probability × lobe density), so a lobe sample's weight is a constant."""
+    def lobes(self, point: ShadingPoint, wo: mi.Vector3f) -> tuple[mi.Spectrum, mi.Spectrum]:
+        """f·|cos θo| and per-wavelength densities p_k of the scattered lobes (light arriving along wo). p_k
+        is that of ``sample`` with hero λ_k (selection probability R_k or T_k × lobe density), so a lobe
+        sample's weight is a constant."""
         surface, wi, wavelengths = self.model, point.wi, point.wavelengths
         outside, n_camera, n_other = self._camera_side(point)
         side = dr.select(outside, 1.0, -1.0)
@@ -54,7 +55,7 @@ class RoughDielectric(Material):
         light = mi.Vector3f(wo.x, wo.y, wo.z * side)
         reflected = light.z > 0
         value = mi.Spectrum(0.0)
-        pdf_sum = mi.Float(0.0)
+        pdfs = mi.Spectrum(0.0)
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
             r_view, cos_t_view = fresnel_dielectric(view.z, n_other[j] / n_camera[j], OPS)
@@ -94,14 +95,16 @@ class RoughDielectric(Material):
                 interior_ior=n_other[j],
             )
             value[j] = dr.select(reflected, reflection, transmission) * dr.abs(light.z)
-            pdf_sum += dr.select(reflected, r_view * reflection_pdf, t_view * transmission_pdf)
-        return value, pdf_sum / len(wavelengths)
+            pdfs[j] = dr.select(reflected, r_view * reflection_pdf, t_view * transmission_pdf)
+        return value, pdfs
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         """Reflect with probability R(λ_hero) else transmit; within each, the specular (delta) part with
         probability ⟨e^{−g}⟩ (the mean over the wavelengths, as for ``rough_conductor``), else an exact
         PSD-lobe sample. Dispersive media keep the hero wavelength only after a specular refraction (as
-        the smooth dielectric does); radiance scales by (n_camera/n_light)² across the interface."""
+        the smooth dielectric does); radiance scales by (n_camera/n_light)² across the interface. The pdf
+        ratios q_k (``common``): R_k/R_hero (T_k/T_hero) for the specular part, p_k/p̄ for the lobe (its
+        p_k already hold R_k or T_k)."""
         surface, wi, wavelengths = self.model, point.wi, point.wavelengths
         outside, n_camera, n_other = self._camera_side(point)
         side = dr.select(outside, 1.0, -1.0)
@@ -149,9 +152,10 @@ class RoughDielectric(Material):
         local = dr.select(specular, specular_dir, lobe)
         wo = mi.Vector3f(local.x, local.y, local.z * side)
         # Lobe sample: the estimator's weight is value / pdf of the same formulation as eval_pdf.
-        lobe_value, lobe_pdf = self.lobes(point, wo)
+        lobe_value, lobe_pdfs = self.lobes(point, wo)
         # Specular sample: R e^{−g} (or T e^{−g_t} with the radiance factor) over its selection probability.
         specular_weight = mi.Spectrum(0.0)
+        specular_ratios = mi.Spectrum(0.0)  # hero k reflects with R_k, transmits with 1 − R_k
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
             eta_j = n_other[j] / n_camera[j]
@@ -168,11 +172,17 @@ class RoughDielectric(Material):
                 / dr.maximum((1.0 - reflectance_hero) * specular_probability, 1e-20)
             )
             specular_weight[j] = dr.select(reflect, reflected_part, transmitted_part)
-        specular_weight = self.params.hero_collapse(
-            specular_weight, point.material, specular & ~reflect & ~point.collapsed
+            specular_ratios[j] = dr.select(
+                reflect,
+                r_j / dr.maximum(reflectance_hero, 1e-12),
+                (1.0 - r_j) / dr.maximum(1.0 - reflectance_hero, 1e-12),
+            )
+        specular_weight, specular_ratios = self.params.hero_collapse(
+            specular_weight, specular_ratios, point.material, specular & ~reflect
         )
         # Russian roulette divides out the radiance factor of a transmission (η of the hero wavelength).
         eta = dr.select(reflect, 1.0, eta_hero)
+        lobe = (lobe_value, lobe_pdfs, lobe_valid)
         return specular_or_lobe(
-            specular, specular_probability, wo, specular_weight, lobe_value, lobe_pdf, lobe_valid, eta
+            specular, specular_probability, wo, specular_weight, *lobe, eta, specular_ratios
         )

@@ -1,8 +1,9 @@
 """Thin film (Eq. 18) on a rough conductor or dielectric substrate.
 
 The film is the rough interface of Eq. 15 (``rough_conductor``: specular part and lobe) whose reflectance
-is the P-beam partially coherent sum R(V) = R_incoherent + Σ_d V_d·X_d, V_d = μ(d·τ·n̂) the visibility of
-the incident light at the d-th beam's shear (``VisibilityModel``). Sampling uses the incoherent part
+is the P-beam partially coherent sum R(V) = R_incoherent + Σ_d V_d·X_d, V_d = μ(d·s) the visibility of
+the incident light at the d-th beam's shear s (``hgcore.optics.thin_film.film_shear``: 2τ tan θ_t in the
+plane of incidence, docs/physics_interactions.md §3) (``VisibilityModel``). Sampling uses the incoherent part
 R_incoherent and returns the terms (``FilmSample``); the integrator rescales the throughput by
 R(V)/R_incoherent once the path has reached the light's source and its coherence is known.
 
@@ -19,9 +20,9 @@ import mitsuba as mi
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_dielectric
 from hgcore.optics.thin_film import (
-    combine_reflectance_terms,
-    film_amplitudes,
-    reflectance_terms,
+    bounded_reflectance,
+    film_reflectance_terms,
+    film_shear,
     transmission_terms,
 )
 from worker.render import materials as mat
@@ -41,7 +42,8 @@ from worker.render.bsdfs.rough_conductor import RoughConductor
 def film_terms(
     params: MaterialParams, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum
 ) -> list[mi.Spectrum]:
-    """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i."""
+    """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i, with every
+    beam (``hgcore.optics.thin_film.film_reflectance_terms``)."""
     exterior = params.param(material, mat.EXTERIOR_IOR)
     thickness_m = params.param(material, mat.FILM_THICKNESS_M)
     film_ior = params.spectrum(material, mat.FILM_IOR_ID, wavelengths)
@@ -49,7 +51,8 @@ def film_terms(
     substrate_k = params.spectrum(material, mat.KAPPA_ID, wavelengths)
     terms = [mi.Spectrum(0.0) for _ in range(params.max_beams)]
     for j in range(len(wavelengths)):
-        amplitudes = film_amplitudes(
+        # every beam, the separations d ≥ P − 1 together (hgcore.optics.thin_film: "All beams")
+        per_wavelength = film_reflectance_terms(
             cos_i,
             wavelengths[j] * 1e-9,
             thickness_m,
@@ -59,7 +62,7 @@ def film_terms(
             params.max_beams,
             OPS,
         )
-        for slot, term in enumerate(reflectance_terms(amplitudes)):
+        for slot, term in enumerate(per_wavelength):
             terms[slot][j] = term
     return terms
 
@@ -71,13 +74,13 @@ def film_reflectance(
     separation_world: mi.Vector3f,
     wavelengths: mi.Spectrum,
 ) -> mi.Spectrum:
-    """R(V) of the partially coherent multi-beam sum (Eq. 18 for P = 2), V_d = μ(d·``separation_world``)
-    of the light described by ``coherence``; ``separation_world`` is τ·n̂ (m) between the interfaces."""
+    """R(V) ∈ [0, 1] of the partially coherent sum of every beam, V_d = μ(d·``separation_world``) of the light
+    described by ``coherence``; ``separation_world`` is the film shear s (m) between successive beams."""
     visibilities = [
         visibility.at(coherence, separation_world * separation, wavelengths)
         for separation in range(1, len(terms))
     ]
-    return dr.maximum(combine_reflectance_terms(terms, visibilities), 0.0)
+    return bounded_reflectance(terms, visibilities, OPS)
 
 
 class ThinFilm(RoughConductor):
@@ -104,10 +107,17 @@ class ThinFilm(RoughConductor):
 
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
-    ) -> tuple[mi.Spectrum, mi.Float]:
+    ) -> tuple[mi.Spectrum, mi.Spectrum]:
         terms = film_terms(self.params, point.material, wo_phase.z, point.wavelengths)
+        # Direct light reaches the film from the exterior side (``eval_domain``): the shear of light
+        # arriving along −wo_phase with the exterior's index (``hgcore.optics.thin_film.film_shear``).
         thickness_m = self.params.param(point.material, mat.FILM_THICKNESS_M)
-        separation = point.frame.n * thickness_m
+        film_ior = self.params.spectrum(point.material, mat.FILM_IOR_ID, point.wavelengths)[0]
+        exterior = self.params.param(point.material, mat.EXTERIOR_IOR)
+        light_world = point.frame.to_world(wo_phase)
+        separation = mi.Vector3f(
+            *film_shear(point.frame.n, -light_world, thickness_m, film_ior, exterior, OPS)
+        )
         reflectance = film_reflectance(
             terms, self.params.visibility, coherence, separation, point.wavelengths
         )
@@ -147,11 +157,15 @@ class ThinFilm(RoughConductor):
         inner_weight = reflectance / dr.maximum(reflect_probability, 1e-12)
         # transmission: specular refraction with T/T_hero and the radiance factor (n_camera/n_light)²
         transmittance = 1.0 - reflectance
-        t_weight = transmittance / dr.maximum(1.0 - reflect_probability, 1e-12) * dr.square(dr.rcp(eta_ti))
-        t_weight = params.hero_collapse(t_weight, material, ~point.collapsed)
+        t_ratios = transmittance / dr.maximum(1.0 - reflect_probability, 1e-12)
+        t_weight = t_ratios * dr.square(dr.rcp(eta_ti))
+        t_weight, t_ratios = params.hero_collapse(t_weight, t_ratios, material, mi.Bool(True))
+        # Hero k reflects with R_k (then, outside, samples the rough film's lobe: its own ratios).
+        r_ratios = dr.select(outside, inner_weight * lobe.pdf_ratios, inner_weight)
         wo = dr.select(reflect, dr.select(outside, lobe.wo, mi.reflect(wi)), refract(wi, eta_ti, cos_t))
         weight = dr.select(reflect, dr.select(outside, r_weight, inner_weight), t_weight)
-        pdf = dr.select(reflect & outside, lobe.pdf, 1.0)
+        ratios = dr.select(reflect, r_ratios, t_ratios)
+        pdf = dr.select(reflect & outside, lobe.pdf, mi.Spectrum(1.0))
         delta = dr.select(reflect & outside, lobe.delta, True)
         no_interference = [mi.Spectrum(1.0 if slot == 0 else 0.0) for slot in range(len(terms))]
         inner_terms = [dr.select(total_internal, a, b) for a, b in zip(no_interference, terms, strict=True)]
@@ -162,4 +176,4 @@ class ThinFilm(RoughConductor):
             for a, b in zip(transmission_terms(terms), reflected_terms, strict=True)
         ]
         eta_sampled = dr.select(transmitted, eta_ti, 1.0)
-        return MaterialSample(wo, weight, pdf, delta, eta_sampled, FilmSample(chosen, transmitted))
+        return MaterialSample(wo, weight, pdf, delta, eta_sampled, FilmSample(chosen, transmitted), ratios)
