@@ -20,6 +20,8 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
+from hgcore.optics.array_ops import NUMPY
+from hgcore.optics.thin_film import film_shear
 from tests.render.scenes import example
 from worker.render.api import render_scene
 
@@ -180,12 +182,36 @@ def test_sphere_source_shows_the_film_colours_across_the_highlight(tmp_path: Pat
     silver (same roughness, same light, no film) shows the lobe's own shading colour only. Asserted: the
     coated shell's chromaticity spread is above the just-noticeable difference, above the bare shell's, and
     both by more than 4 standard errors (Monte Carlo, from a second seed: ``chromatic_spread``)."""
-    scene = example("fig7_thin_film_sphere_light", width=96, height=96, spp=64)
+    scene = example("fig7_thin_film_sphere_light", width=128, height=128, spp=128)
     coated, coated_error = chromatic_spread(scene, tmp_path, "coated")
     silver, silver_error = chromatic_spread(bare_silver(scene), tmp_path, "bare")
 
     assert coated > LAB_JND + 4.0 * coated_error
     assert coated - silver > 4.0 * math.hypot(coated_error, silver_error)
+
+
+def shear_along_tube_m(scene: dict, normal_x: float) -> float:
+    """|s⊥·x̂| (m): the film shear's component along the tube (x) and transverse to the incident light, at
+    the top of the coated shell for a normal that bisects the directions to the light and to the camera
+    (the highlight's) tilted to ``normal_x`` along the tube."""
+    shell = next(shape for shape in scene["shapes"] if shape["material"] == "coated_silver")
+    film = scene["materials"]["coated_silver"]
+    (tube,) = scene["emitters"]
+    top = np.asarray(shell["center_m"]) + np.array([0.0, shell["semi_axes_m"][1], 0.0])
+    light = 0.5 * (np.asarray(tube["p0_m"]) + np.asarray(tube["p1_m"]))
+
+    def unit(v: np.ndarray) -> np.ndarray:
+        return v / np.linalg.norm(v)
+
+    to_light = unit(light - top)
+    half = unit(to_light + unit(np.asarray(scene["camera"]["origin_m"]) - top))
+    normal = np.array([normal_x, *(math.sqrt(1.0 - normal_x**2) * unit(half[1:]))])
+    incident = -to_light
+    shear = np.array(
+        film_shear(normal, incident, film["film_thickness_um"] * 1e-6, film["film_ior"], 1.0, NUMPY)
+    )
+    transverse = shear - np.dot(shear, incident) * incident
+    return abs(float(transverse[0]))
 
 
 @pytest.mark.slow
@@ -197,12 +223,15 @@ def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_
 
     Measure: per 2×2 bin of the lit shell, the CIELAB (a*, b*) distance between the coated render and bare
     rough silver rendered with the same seed (same paths, so the lobe's colour and most of the noise
-    cancel): the film's own colour. Eq. 18 scales the fringe terms by V = μ at the beams' separation τ·n
-    (transverse part); along the tube μ = exp(−½ (τ n_x/ℓ₂)²) (Gaussian-equivalent VCZ, ℓ₂ measured in
-    the EXR), across it ℓ₁ ≫ τ, and under the sphere V ≈ 1 everywhere. So the cylinder/sphere ratio of
-    the film's colour is ≈ 1 on the crest and falls with |n_x|: at the boundary |n_x| = 0.3 the
-    prediction is V_b = exp(−½ (0.3 τ/ℓ₂)²) (0.56 here). Asserted: the crest's ratio (|n_x| < 0.15) is
-    above V_b, the flanks' (|n_x| ≥ 0.3) below it, each by 4 standard errors of its bins."""
+    cancel): the film's own colour. The fringe terms scale with V = μ at the transverse part of the film
+    shear s (hgcore.optics.thin_film.film_shear: 2τ tan θ_t in the plane of incidence, along the incident
+    direction's tangential part); along the tube μ = exp(−½ (s⊥·x̂/ℓ₂)²) (Gaussian-equivalent VCZ, ℓ₂
+    measured in the EXR), across it ℓ₁ ≫ |s|, and under the sphere V ≈ 1 everywhere. s⊥·x̂ grows with the
+    normal's tilt n_x along the tube (zero on the crest), so the cylinder/sphere ratio of the film's colour
+    is ≈ 1 on the crest and falls with |n_x|; V(n_x) with s computed at the top of the shell for a normal
+    bisecting the directions to the light and the camera, tilted to n_x. Asserted, each by 4 standard
+    errors of the bins: the crest's ratio (|n_x| < 0.15) is not below V(0.15), the flanks' (|n_x| ≥ 0.3)
+    is below V(0.3), and the crest keeps more of the colour than the flanks."""
     size_px, bin_px = 96, 2
     departures = {}
     for kind in ("sphere", "cylinder"):
@@ -227,9 +256,12 @@ def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_
     shell = image.stack([f"albedo.{c}" for c in "RGB"]).mean(axis=-1) > 0.3
     lit_px = shell & (luminance > 0.05 * np.percentile(luminance[shell], 99))
     l2_m = float(np.median(image.channels["coherence.l2_um"][lit_px])) * 1e-6
-    tau_m = scene["materials"]["coated_silver"]["film_thickness_um"] * 1e-6
-    boundary_visibility = math.exp(-0.5 * (0.3 * tau_m / l2_m) ** 2)
+
+    def visibility(normal_x: float) -> float:
+        return math.exp(-0.5 * (shear_along_tube_m(scene, normal_x) / l2_m) ** 2)
+
     lit = departures["sphere"][1] & departures["cylinder"][1]
+    ratios = {}
     for band, low, high in (("crest", 0.0, 0.15), ("flanks", 0.3, 1.0)):
         bins = lit & (nx >= low) & (nx < high)
         assert bins.sum() >= 10, band
@@ -239,11 +271,14 @@ def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_
             errors[kind] = float(departure[bins].std(ddof=1)) / math.sqrt(bins.sum())
         ratio = means["cylinder"] / means["sphere"]
         error = ratio * math.hypot(errors["cylinder"] / means["cylinder"], errors["sphere"] / means["sphere"])
-        if band == "crest":
+        ratios[band] = (ratio, error)
+        if band == "crest":  # every crest bin has V ≥ V(0.15): the colour is kept
             assert means["cylinder"] > LAB_JND + 4.0 * errors["cylinder"]
-            assert ratio > boundary_visibility + 4.0 * error, (ratio, error, boundary_visibility)
-        else:
-            assert ratio < boundary_visibility - 4.0 * error, (ratio, error, boundary_visibility)
+            assert ratio > visibility(0.15) - 4.0 * error, (ratio, error, visibility(0.15))
+        else:  # every flank bin has V ≤ V(0.3): the colour fades
+            assert ratio < visibility(0.3) - 4.0 * error, (ratio, error, visibility(0.3))
+    (crest, crest_error), (flanks, flanks_error) = ratios["crest"], ratios["flanks"]
+    assert crest - flanks > 4.0 * math.hypot(crest_error, flanks_error)
 
 
 @pytest.mark.slow
