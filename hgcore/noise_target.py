@@ -150,10 +150,11 @@ def stop_reason(target: NoiseTarget, error: float, spp_done: int, max_spp: int) 
 
 
 def summary_block(
-    target: NoiseTarget, sums: PixelSums, rounds: list[dict[str, Any]], reason: str
+    target: NoiseTarget, sums: PixelSums, rounds: list[dict[str, Any]], reason: str | None
 ) -> dict[str, Any]:
     """The ``noise_target`` block of ``summary.json``: the request, the achieved error in its measure and
-    per band, whether it was met, why the rounds stopped and each round's spp, seconds and error."""
+    per band, whether it was met, why the rounds stopped and each round's spp, seconds and error. While
+    a job still renders, the same block of the rounds so far (``reason`` None) is its view's progress."""
     error = achieved_error(target, sums)
     return {
         "target_rel_error": target.rel_error,
