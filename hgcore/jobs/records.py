@@ -200,7 +200,9 @@ class JobRecords:
     def noise_target_round(self, job_id: str, block: dict[str, Any]) -> bool:
         """A running noise-target job finished a round (its preview is stored): record the block of the
         rounds so far (``hgcore.noise_target.summary_block``, ``stop_reason`` null) for the job view and
-        publish a ``round`` event. False (nothing written) unless the job is running."""
+        publish a ``round`` message on the job's channel (an event stream answers any message other
+        than ``progress`` with the re-read view: a ``status`` event carrying the new block). False
+        (nothing written) unless the job is running."""
         payload = json.dumps(block)
         event = json.dumps({"type": "round", "noise_target": block})
         written = self._noise_target_round_script(

@@ -160,7 +160,6 @@ export class JobsPanel {
     if (!job) return;
     if (type === "status") this.jobs.set(id, data);
     else if (type === "progress") Object.assign(job, { progress: data.progress, chunks_done: data.chunks_done, eta_s: data.eta_s, status: job.status === "queued" ? "running" : job.status });
-    else if (type === "round") job.noise_target = { ...job.noise_target, ...data.noise_target };
     this.renderRow(this.jobs.get(id));
   }
 
