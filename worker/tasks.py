@@ -255,20 +255,44 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
     return {"samples": result["samples"], "seconds": result["seconds"]}
 
 
+PREVIEW_OVERHEAD_RATIO = 10.0
+"""A noise-target job publishes a round's preview when it rendered at least this many times the last
+publication's cost since then: previews add at most the first one's cost plus 1/10 to the render."""
+
+
 class _RoundPreviews:
-    """``on_round`` of a noise-target job: after each round that another follows, publish the image of
-    the rounds so far where a multi-chunk job's finished chunks are, as chunk 0's partial
+    """``on_round`` of a noise-target job: after a round that another follows, publish the image of the
+    rounds so far where a multi-chunk job's finished chunks are, as chunk 0's partial
     (``jobs/<id>/chunks/0.npz``: a target job is one chunk; atomic, replaced round by round, so the
     viewer's merge of the chunk partials shows it), then record the block of the rounds so far in the
     job view (``JobRecords.noise_target_round``; the viewer refreshes when its round count changes).
     The partial is streamed row band by row band (one tile's float32 table at a time) from the sums
-    the render holds anyway; the final artifacts are written from the same sums as before."""
+    the render holds anyway; the final artifacts are written from the same sums as before.
+
+    Publishing costs time that grows with the image (at 1024² × 32 bands: a 368 MiB partial written and
+    stored, and the per-band errors, ≈ 3–5 s on 2 cores), while a round near the target can be short
+    (the next round adds at least N/16 spp). So the first round is always published (the viewer has an
+    image early) and a later one only once the render time since the last publication is at least
+    ``PREVIEW_OVERHEAD_RATIO`` times that publication's cost; small images publish every round."""
 
     def __init__(self, jobs: JobRecords, job_id: str, target: NoiseTarget, seed: int, work_dir: Path) -> None:
         self.jobs, self.job_id, self.target, self.seed = jobs, job_id, target, seed
         self.path = work_dir / "round-preview.npz"
+        self.published_at_render_s: float | None = None  # render seconds at the last publication
+        self.cost_s = 0.0  # what the last publication took (wall seconds)
 
     def __call__(self, running: PixelSums, rounds: list[dict[str, Any]]) -> None:
+        render_s = rounds[-1]["seconds"]
+        if (
+            self.published_at_render_s is not None
+            and render_s - self.published_at_render_s < PREVIEW_OVERHEAD_RATIO * self.cost_s
+        ):
+            return
+        started = time.perf_counter()
+        self._publish(running, rounds)
+        self.published_at_render_s, self.cost_s = render_s, time.perf_counter() - started
+
+    def _publish(self, running: PixelSums, rounds: list[dict[str, Any]]) -> None:
         from worker.render.renderer import tile_rows
 
         height, width, band_count = running.bands.shape

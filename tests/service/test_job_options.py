@@ -90,22 +90,20 @@ def test_a_noise_target_job_publishes_its_image_after_each_round_while_it_runs(
 ) -> None:
     """Issue 16 item 4: the viewer's preview of a running target job is the image of the rounds so far.
     A 0.5 % band-mean target on a 16² Cornell box from 2 spp needs ~10⁴ spp (the error falls as 1/√N),
-    in rounds of 2, 18, 162, 1458, … spp (8× growth cap): the later rounds last long enough (≳ 0.1 s
-    each, seconds for the last) for 0.1-s polling to see several of them."""
+    in rounds of 2, 18, 162, 1458, … spp (8× growth cap). The job's event stream sends the view after
+    each published round (the first always; later ones once the render since outlasts 10× the last
+    publication: here at least the 1458-spp round's), and the preview is read over HTTP right then."""
     token = live_service.token("pia")
     client = live_service.client(token)
     job_id = client.submit(tiny_scene(spp=2), target_rel_error=0.005)["id"]
     observed: dict[int, float] = {}  # round count → achieved error the running job's view showed
     previews: list[tuple[int, int]] = []  # (rounds seen in the view, spp of the preview served)
-    live_service.start_worker("rounds")
+    events = client.events(job_id, deadline=time.monotonic() + 240)
     try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline:
-            view = client.get(job_id)
-            if view["status"] != "running":
-                if view["status"] in ("succeeded", "failed", "canceled"):
-                    break
-                time.sleep(0.05)
+        next(events)  # the stream is open (the first view): no round published from now on is missed
+        live_service.start_worker("rounds")
+        for event, view in events:
+            if event != "status" or view["status"] != "running":
                 continue
             block = view["noise_target"]
             rounds = block.get("rounds") or []
@@ -115,9 +113,9 @@ def test_a_noise_target_job_publishes_its_image_after_each_round_while_it_runs(
                 layers = http_get(live_service, f"/v1/jobs/{job_id}/layers", token)
                 if layers.status_code == 200 and layers.json()["partial"]:
                     previews.append((len(rounds), layers.json()["spp"]))
-            time.sleep(0.1)
         final = client.get(job_id)
     finally:
+        events.close()
         live_service.stop_workers()
     assert final["status"] == "succeeded", final.get("error")
     result = final["noise_target"]

@@ -455,9 +455,10 @@ def test_upload_a_json_scene_with_overrides(page: Any, served: Served, tmp_path:
 
 def test_viewer_refines_a_noise_target_job_round_by_round(page: Any, served: Served) -> None:
     """Issue 16 item 4: opened while a noise-target job runs, the viewer shows the image of the rounds
-    finished so far and reloads it after each round (polling the job every second), then the final
-    image. A 0.3 % band-mean target from 2 spp on the 24² cylinder-light plane takes rounds of 2, 18,
-    162, 1458, … spp (8× growth cap), the later ones seconds each on 2 cores."""
+    finished so far and reloads it when a newer one is published (polling the job every second), then
+    the final image. A 0.3 % band-mean target from 2 spp on the 24² cylinder-light plane takes rounds of
+    2, 18, 162, 1458, … spp (8× growth cap); the first round's preview and that of a later round
+    lasting seconds (published: it outlasts 10× the first publication) are each shown ≥ 1 s."""
     job_id = served.client.submit(cylinder_scene(spp=2), name="refining", target_rel_error=0.003)["id"]
     deadline = time.monotonic() + 120
     while not (served.client.get(job_id)["noise_target"].get("rounds") or []):
