@@ -417,15 +417,16 @@ export class ImageViewer {
   async refresh(jobId) {
     const catalogue = await this.api.json(`/v1/jobs/${jobId}/layers`);
     if (this.jobId !== jobId || catalogue.width !== this.catalogue.width || catalogue.height !== this.catalogue.height) return;
+    // The layers shown are loaded anew before anything is drawn; if one fails, the old image stays.
     const shown = [...this.layers.keys()];
-    const layers = new Map();
-    const previous = this.layers;
-    this.layers = layers;
+    const previous = { layers: this.layers, catalogue: this.catalogue };
+    this.layers = new Map();
     this.useCatalogue(catalogue);
     try {
       for (const name of shown) await this.layer(name);
     } catch (error) {
-      this.layers = previous;
+      this.layers = previous.layers;
+      this.useCatalogue(previous.catalogue);
       throw error;
     }
     if (this.jobId !== jobId) return;
