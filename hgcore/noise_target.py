@@ -150,18 +150,23 @@ def stop_reason(target: NoiseTarget, error: float, spp_done: int, max_spp: int) 
 
 
 def summary_block(
-    target: NoiseTarget, sums: PixelSums, rounds: list[dict[str, Any]], reason: str
+    target: NoiseTarget, sums: PixelSums, rounds: list[dict[str, Any]], reason: str | None
 ) -> dict[str, Any]:
     """The ``noise_target`` block of ``summary.json``: the request, the achieved error in its measure and
-    per band, whether it was met, why the rounds stopped and each round's spp, seconds and error."""
-    error = achieved_error(target, sums)
+    per band, whether it was met, why the rounds stopped and each round's spp, seconds and error. While
+    a job still renders, the same block of the rounds so far (``reason`` None) is its view's progress."""
+    band_errors = band_rel_errors(sums)  # once: the band-mean measure is its maximum (achieved_error)
+    if target.quantile is not None:
+        error = luminance_rel_error(sums, target.quantile)
+    else:
+        error = float(band_errors.max(initial=0.0))
     return {
         "target_rel_error": target.rel_error,
         "time_budget_s": target.time_budget_s,
         "target_quantile": target.quantile,
         "metric": target.metric,
         "achieved_rel_error": error,
-        "band_rel_error": band_rel_errors(sums).tolist(),
+        "band_rel_error": band_errors.tolist(),
         "met": target.rel_error is not None and error <= target.rel_error,
         "stop_reason": reason,
         "spp": sums.sample_count,

@@ -102,6 +102,7 @@ class DecodedImage:
     band_names: list[str] = field(default_factory=list)
     wavelengths_nm: list[float] = field(default_factory=list)
     partial: bool = False  # merged from the chunks finished so far (the job is still running)
+    spp: int | None = None  # samples per pixel of a partial (a running job's preview), else unknown
     _layers: list[LayerInfo] | None = None
     _exposure_ev: float | None = None
 
@@ -236,7 +237,13 @@ class UploadedImages:
             return entry[1]
 
 
-def _decoded(width: int, height: int, channels: dict[str, np.ndarray], partial: bool = False) -> DecodedImage:
+def _decoded(
+    width: int,
+    height: int,
+    channels: dict[str, np.ndarray],
+    partial: bool = False,
+    spp: int | None = None,
+) -> DecodedImage:
     band_names = sorted((n for n in channels if is_spectral_channel(n)), key=spectral_channel_wavelength_nm)
     return DecodedImage(
         width=width,
@@ -245,6 +252,7 @@ def _decoded(width: int, height: int, channels: dict[str, np.ndarray], partial: 
         band_names=band_names,
         wavelengths_nm=[spectral_channel_wavelength_nm(n) for n in band_names],
         partial=partial,
+        spp=spp,
     )
 
 
@@ -260,7 +268,7 @@ def merge_partials(paths: list[Path], film: dict[str, Any]) -> DecodedImage:
     bands = BandLayout(film["wavelength_min_nm"], film["wavelength_max_nm"], film["bands"])
     channels = channels_from_sums(total, bands)
     height, width = channels[COHERENCE_WEIGHT].shape
-    return _decoded(width, height, channels, partial=True)
+    return _decoded(width, height, channels, partial=True, spp=total.sample_count)
 
 
 class DecodedImageCache:
@@ -293,8 +301,10 @@ class DecodedImageCache:
             self.store.get_file(key, path)
             return self._keep(cache_key, decode_exr(path))
 
-    def get_partial(self, job_id: str, film: dict[str, Any]) -> DecodedImage:
-        """A running job's preview from its finished chunk partials; ArtifactNotFoundError when none."""
+    def get_partial(self, job_id: str, film: dict[str, Any], revision: int = 0) -> DecodedImage:
+        """A running job's preview from its finished chunk partials; ArtifactNotFoundError when none.
+        ``revision`` tells apart partials that a job replaces under the same key with the same size (a
+        noise-target job's chunk 0 after each round: the caller passes its round count)."""
         prefix = chunks_prefix(job_id)
         listed = sorted(
             (info for info in self.store.list(prefix) if info.key.endswith(CHUNK_PARTIAL_SUFFIX)),
@@ -302,7 +312,7 @@ class DecodedImageCache:
         )
         if not listed:
             raise ArtifactNotFoundError("chunks")
-        cache_key = (job_id, hash(tuple((info.key, info.size_bytes) for info in listed)))
+        cache_key = (job_id, hash((revision, *((info.key, info.size_bytes) for info in listed))))
         cached = self._cached(cache_key)
         if cached is not None:
             return cached

@@ -60,6 +60,16 @@ redis.call('PUBLISH', ARGV[2], ARGV[3])
 return 1
 """
 
+# KEYS: job hash. ARGV: noise-target block (JSON), channel, payload, the running status. Stores a
+# running noise-target job's block of the rounds so far and publishes it, only while the job runs: a job
+# deleted or canceled meanwhile is not recreated by a late round.
+_NOISE_TARGET_ROUND_LUA = """
+if redis.call('HGET', KEYS[1], 'status') ~= ARGV[4] then return 0 end
+redis.call('HSET', KEYS[1], 'noise_target', ARGV[1])
+redis.call('PUBLISH', ARGV[2], ARGV[3])
+return 1
+"""
+
 
 class JobNotFoundError(KeyError):
     """No job with this id (or not visible to the caller)."""
@@ -79,6 +89,7 @@ class JobRecords:
         self.settings = settings
         self._transition_script = client.register_script(_TRANSITION_LUA)
         self._publish_progress_script = client.register_script(_PUBLISH_PROGRESS_LUA)
+        self._noise_target_round_script = client.register_script(_NOISE_TARGET_ROUND_LUA)
 
     # ---- reading --------------------------------------------------------------------------------------
 
@@ -185,6 +196,19 @@ class JobRecords:
                 keys=[job_key(job_id)],
                 args=[repr(view.progress), events_channel(job_id), json.dumps(event)],
             )
+
+    def noise_target_round(self, job_id: str, block: dict[str, Any]) -> bool:
+        """A running noise-target job finished a round (its preview is stored): record the block of the
+        rounds so far (``hgcore.noise_target.summary_block``, ``stop_reason`` null) for the job view and
+        publish a ``round`` message on the job's channel (an event stream answers any message other
+        than ``progress`` with the re-read view: a ``status`` event carrying the new block). False
+        (nothing written) unless the job is running."""
+        payload = json.dumps(block)
+        event = json.dumps({"type": "round", "noise_target": block})
+        written = self._noise_target_round_script(
+            keys=[job_key(job_id)], args=[payload, events_channel(job_id), event, JobStatus.RUNNING.value]
+        )
+        return bool(written)
 
     def chunk_finished(self, job_id: str, index: int | str, samples: int, seconds: float) -> None:
         """A chunk (or ``merge``) completed: count the completion (tests check it is counted once)."""

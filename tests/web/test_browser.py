@@ -10,6 +10,7 @@ where a value lands within rounding of a quantisation boundary: ±1 level.
 from __future__ import annotations
 
 import io
+import itertools
 import time
 from typing import Any
 
@@ -18,7 +19,7 @@ import pytest
 from PIL import Image
 
 from hgcore.imaging import auto_exposure_ev, display_rgb8
-from tests.web.conftest import SIZE_PX, RenderedJob, Served, screenshot
+from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, screenshot
 
 pytestmark = pytest.mark.browser
 
@@ -450,3 +451,50 @@ def test_upload_a_json_scene_with_overrides(page: Any, served: Served, tmp_path:
     assert final["status"] == "succeeded" and final["spp"] == 2 and final["name"] == "uploaded"
     layers = served.get(f"/v1/jobs/{job_id}/layers").json()
     assert (layers["width"], layers["height"]) == (16, 12)  # the overrides were edited into film
+
+
+def test_viewer_refines_a_noise_target_job_round_by_round(page: Any, served: Served) -> None:
+    """Issue 16 item 4: opened while a noise-target job runs, the viewer shows the image of the rounds
+    finished so far and reloads it when a newer one is published (polling the job every second), then
+    the final image. A 0.3 % band-mean target from 2 spp on the 24² cylinder-light plane takes rounds of
+    2, 18, 162, 1458, … spp (8× growth cap); the first round's preview and that of a later round
+    lasting seconds (published: it outlasts 10× the first publication) are each shown ≥ 1 s."""
+    job_id = served.client.submit(cylinder_scene(spp=2), name="refining", target_rel_error=0.003)["id"]
+    deadline = time.monotonic() + 120
+    while not (served.client.get(job_id)["noise_target"].get("rounds") or []):
+        assert time.monotonic() < deadline and served.client.get(job_id)["status"] in ("queued", "running")
+        time.sleep(0.05)
+    open_viewer(page, served, job_id)
+    shown: dict[int, np.ndarray] = {}  # preview spp → canvas shown for it
+    while time.monotonic() < deadline:
+        # One evaluate reads the line and the canvas together (no refresh can run in between).
+        spp, text = page.evaluate(
+            "() => [document.querySelector('#viewer-size').dataset.spp,"
+            " document.querySelector('#viewer-size').textContent]"
+        )
+        canvas = canvas_rgb(page)
+        if spp != page.get_attribute("#viewer-size", "data-spp"):
+            continue  # refreshed between the two reads
+        if not spp:
+            break  # the final image (not a preview)
+        if int(spp) not in shown:
+            shown[int(spp)] = canvas
+            assert f"preview at {spp} spp" in text
+            screenshot(page, f"viewer_refining_{len(shown)}")
+        page.wait_for_timeout(50)
+    final = served.wait_final(job_id)
+    assert final["status"] == "succeeded"
+    rounds_spp = [int(r["spp"]) for r in final["noise_target"]["rounds"]]
+    # At least two rounds' previews were shown one after the other without reopening, each a round's
+    # image (not the final one), and each different (more samples: less noise).
+    assert len(shown) >= 2, (sorted(shown), rounds_spp)
+    assert set(shown) <= set(rounds_spp[:-1]), (sorted(shown), rounds_spp)
+    canvases = [shown[spp] for spp in sorted(shown)]
+    assert all(np.abs(a - b).max() > 0 for a, b in itertools.pairwise(canvases))
+    # Then the final image replaces the last preview at the exposure the user had: the server's display.
+    ev = float(page.get_attribute("#image-canvas", "data-ev"))
+    png = served.get(f"/v1/jobs/{job_id}/display.png", ev=ev, tonemap="clamp").content
+    server = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int64)
+    assert np.abs(canvas_rgb(page) - server).max() <= 1
+    assert page.is_enabled("#download-exr")
+    screenshot(page, "viewer_refined_final")

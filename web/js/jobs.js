@@ -233,8 +233,9 @@ export class JobsPanel {
     tr.querySelector(".job-duration").textContent = formatDuration(duration);
     const rate = samplesPerSecond(job);
     tr.querySelector(".job-rate").textContent = rate == null ? "—" : `${formatValue(rate)} samples/s`;
-    // A running job can be previewed once a chunk has finished (the API merges the finished chunks).
-    tr.querySelector(".job-view").disabled = !(job.status === "succeeded" || (job.status === "running" && job.chunks_done > 0));
+    // A running job can be previewed once a chunk (a noise-target job: a round) has finished (the API
+    // merges the finished chunks' partials).
+    tr.querySelector(".job-view").disabled = !(job.status === "succeeded" || (job.status === "running" && previewRevision(job) > 0));
     tr.querySelector(".job-cancel").disabled = FINAL.has(job.status);
   }
 
@@ -293,4 +294,10 @@ export class JobsPanel {
     this.root.querySelector("#submit-status").textContent = `submitted ${created.id}`;
     return created.id;
   }
+}
+
+/** How many previews a running job has published: its finished chunks plus its noise-target rounds (a
+ * target job replaces its one preview after each round). The viewer refreshes when this changes. */
+export function previewRevision(job) {
+  return job.chunks_done + (job.noise_target?.rounds?.length ?? 0);
 }

@@ -9,6 +9,7 @@
 import { autoExposureEv, displayRgb8, luminance } from "./imaging.js";
 import { drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";
 import { coherenceDisplayValue, PixelInspector, REFERENCE_WAVELENGTH_NM, saveBlob, SLOT_COLOURS } from "./inspector.js";
+import { previewRevision } from "./jobs.js";
 
 export const DIAGNOSTIC_LAYERS = [
   ["coherence.l1_um", "ℓ₁ (coherence length, major)"],
@@ -30,6 +31,7 @@ const MIN_SEMI_AXIS_SCREEN_PX = 1.5; // thinner ellipses are drawn this wide (sa
 const ELLIPSE_SCALE_KEY = "hgrender.ellipseUmPerPx";
 const SCALE_BAR_TARGET_PX = 100;
 const CHANNEL_TEXT_COLOURS = ["#ff9a9a", "#9aff9a", "#9ab8ff"]; // R, G, B values on the pixels (as tev)
+export const PREVIEW_POLL_MS = 1000; // how often a running job's preview checks for a newer one
 
 export class ImageViewer {
   constructor(root, api, { onError }) {
@@ -291,6 +293,7 @@ export class ImageViewer {
 
   /** Show that there is no image (wrong id, job without an image): nothing of the previous one stays. */
   clear(title) {
+    this.stopFollowing();
     this.jobId = null;
     this.catalogue = null;
     this.layers.clear();
@@ -315,6 +318,7 @@ export class ImageViewer {
       this.clear("No such job");
       throw new Error(`no such job: ${jobId} (job ids are 32 hexadecimal digits)`);
     }
+    this.stopFollowing();
     this.jobId = jobId;
     this.layers.clear();
     try {
@@ -334,8 +338,7 @@ export class ImageViewer {
       svg.setAttribute("width", width);
       svg.setAttribute("height", height);
     }
-    this.info = new Map(this.catalogue.layers.map((layer) => [layer.name, layer]));
-    this.bandNames = this.catalogue.layers.filter((l) => l.kind === "band").map((l) => l.name);
+    this.useCatalogue(this.catalogue);
     const band = this.controls.band;
     band.max = String(Math.max(this.bandNames.length - 1, 0));
     band.value = String(Math.floor(this.bandNames.length / 2));
@@ -343,17 +346,9 @@ export class ImageViewer {
     const mode = this.controls.mode;
     mode.replaceChildren(new Option("1 · sRGB (from the spectrum)", "srgb"), new Option("2 · single band (false colour)", "band"));
     for (const [name, text] of DIAGNOSTIC_LAYERS) if (this.info.has(name)) mode.append(new Option(`${mode.options.length + 1} · ${text}`, name));
-    const uploaded = this.catalogue.uploaded;
-    this.root.querySelector("#viewer-title").textContent = uploaded ? `Local file ${label || ""}`.trim() : `Job ${label || jobId}`;
+    this.root.querySelector("#viewer-title").textContent = this.catalogue.uploaded ? `Local file ${label || ""}`.trim() : `Job ${label || jobId}`;
     this.root.querySelector("#viewer-hint").hidden = true;
-    const partial = this.catalogue.partial ? " — preview of the chunks finished so far (job running; reopen to refresh)" : "";
-    const source = uploaded ? " — dropped EXR, held in the service's memory (not stored)" : "";
-    this.root.querySelector("#viewer-size").textContent = `${width}×${height} px, ${this.bandNames.length} bands${partial}${source}`;
-    this.root.querySelector("#downloads").hidden = false;
-    const exr = this.root.querySelector("#download-exr");
-    exr.disabled = uploaded || this.catalogue.partial;
-    exr.title = exr.disabled ? "the spectral EXR exists once the job has finished (a dropped file is already on your disk)" : "";
-    this.root.querySelector("#download-diagnostics").disabled = !this.info.has("coherence.weight");
+    this.describe();
     // The slider is centred on this image's automatic exposure, so it always holds it.
     this.autoEv = this.catalogue.exposure_ev ?? autoExposureEv(await this.layer("rgb"));
     const centre = Math.round(this.autoEv);
@@ -364,6 +359,80 @@ export class ImageViewer {
     this.fit();
     await this.draw();
     this.inspector.reset(this.catalogue);
+    await this.loadEllipses();
+    if (this.catalogue.partial) this.follow(jobId);
+  }
+
+  /** Take the layer catalogue of the image being shown. */
+  useCatalogue(catalogue) {
+    this.catalogue = catalogue;
+    this.info = new Map(catalogue.layers.map((layer) => [layer.name, layer]));
+    this.bandNames = catalogue.layers.filter((l) => l.kind === "band").map((l) => l.name);
+  }
+
+  /** The line under the title (size, bands, what a preview is) and the download buttons. */
+  describe() {
+    const { width, height, uploaded, partial, spp } = this.catalogue;
+    const refining = partial ? ` — preview at ${spp ?? "?"} spp (job running; refreshes as chunks or rounds finish)` : "";
+    const source = uploaded ? " — dropped EXR, held in the service's memory (not stored)" : "";
+    const size = this.root.querySelector("#viewer-size");
+    size.textContent = `${width}×${height} px, ${this.bandNames.length} bands${refining}${source}`;
+    size.dataset.spp = spp ?? "";
+    this.root.querySelector("#downloads").hidden = false;
+    const exr = this.root.querySelector("#download-exr");
+    exr.disabled = uploaded || partial;
+    exr.title = exr.disabled ? "the spectral EXR exists once the job has finished (a dropped file is already on your disk)" : "";
+    this.root.querySelector("#download-diagnostics").disabled = !this.info.has("coherence.weight");
+  }
+
+  /**
+   * While a running job's preview is shown, check its job every PREVIEW_POLL_MS and load the newer
+   * preview when a chunk or a noise-target round finished, or the final image once it succeeded. The
+   * zoom, pan, exposure and display mode stay as the user set them.
+   */
+  follow(jobId) {
+    let revision = null;
+    const tick = async () => {
+      if (this.jobId !== jobId) return;
+      try {
+        const job = await this.api.json(`/v1/jobs/${jobId}`);
+        const now = `${job.status}/${previewRevision(job)}`;
+        if (revision !== null && now !== revision) await this.refresh(jobId);
+        revision = now;
+        if (job.status !== "running") return this.stopFollowing();
+      } catch {
+        // A transient error (the preview replaced while it was read): the next tick tries again.
+      }
+      if (this.jobId === jobId) this.followTimer = window.setTimeout(tick, PREVIEW_POLL_MS);
+    };
+    this.followTimer = window.setTimeout(tick, 0);
+  }
+
+  stopFollowing() {
+    window.clearTimeout(this.followTimer);
+    this.followTimer = null;
+  }
+
+  /** Load the job's current image (a newer preview or the final image) in place of the one shown. */
+  async refresh(jobId) {
+    const catalogue = await this.api.json(`/v1/jobs/${jobId}/layers`);
+    if (this.jobId !== jobId || catalogue.width !== this.catalogue.width || catalogue.height !== this.catalogue.height) return;
+    // The layers shown are loaded anew before anything is drawn; if one fails, the old image stays.
+    const shown = [...this.layers.keys()];
+    const previous = { layers: this.layers, catalogue: this.catalogue };
+    this.layers = new Map();
+    this.useCatalogue(catalogue);
+    try {
+      for (const name of shown) await this.layer(name);
+    } catch (error) {
+      this.layers = previous.layers;
+      this.useCatalogue(previous.catalogue);
+      throw error;
+    }
+    if (this.jobId !== jobId) return;
+    await this.draw();
+    this.describe(); // after the draw: the line never names a preview that is not on the canvas yet
+    this.inspector.render();
     await this.loadEllipses();
   }
 

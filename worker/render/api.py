@@ -33,6 +33,9 @@ from worker.render.renderer import Renderer, tile_rows
 from worker.render.scene_compiler import SceneCompiler
 
 ProgressCallback = Callable[[float], None]
+RoundCallback = Callable[[PixelSums, list[dict[str, Any]]], None]
+"""``on_round(running, rounds)`` of a noise-target render: the rounded sums of the rounds so far and each
+round's ``{"spp", "seconds", "rel_error"}`` (``hgcore.noise_target.summary_block``'s ``rounds``)."""
 
 
 @dataclass(frozen=True)
@@ -251,6 +254,7 @@ def render_to_dir(
     bundle_dir: Path | None = None,
     on_chunk: Callable[[PixelSums], None] | None = None,
     target: NoiseTarget | None = None,
+    on_round: RoundCallback | None = None,
     extra_summary: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Render ``plan``'s chunks in this process and write the final artifacts to ``out_dir``.
@@ -258,7 +262,9 @@ def render_to_dir(
     Streams tile by tile unless ``on_chunk(sums)`` wants the running sum of the chunks finished so far
     after each one (previews) or a noise ``target`` adds chunks (rounds) until it is met; those two hold
     the whole image's sums, in chunk-major order, which gives the same bits (the same rounded chunk tile
-    sums added in the same order)."""
+    sums added in the same order). With a ``target``, ``on_round(running, rounds)`` is called after each
+    round that another round follows (a running job's preview; the last round's sums become the final
+    artifacts instead); it only reads the sums, so the result is the same with or without it."""
     load_started = time.perf_counter()
     renderer = renderer_for(scene, bundle_dir)
     load_seconds = time.perf_counter() - load_started  # counted as render time, as a chunk's is
@@ -302,6 +308,8 @@ def render_to_dir(
                 ABSOLUTE_MAX_SPP,
             )
             if more > 0:
+                if on_round is not None:
+                    on_round(running, rounds)
                 chunks.append(ChunkSpec(len(chunks), more, chunk_seed(scene.film.seed, len(chunks))))
                 # The total is now a prediction: progress runs over the samples planned so far.
                 tracker.total += more

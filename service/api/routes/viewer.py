@@ -73,7 +73,14 @@ class LayerCatalogue(BaseModel):
     height: int
     wavelengths_nm: list[float]
     layers: list[LayerView]
-    partial: bool = Field(False, description="True while the job runs: merged from its finished chunks.")
+    partial: bool = Field(
+        False,
+        description="True while the job runs: merged from its finished chunks (a noise-target job: the "
+        "rounds finished so far, replaced after each round).",
+    )
+    spp: int | None = Field(
+        None, description="Samples per pixel of a partial image (a running job's preview); null otherwise."
+    )
     uploaded: bool = Field(False, description="True for an EXR dropped into the viewer (POST /v1/images).")
     exposure_ev: float = Field(
         description="Automatic exposure (EV): maps the 99th percentile of luminance Y (from the bands) to "
@@ -158,8 +165,10 @@ async def _image(request: Request, jobs: JobsDep, principal: Reader, job_id: str
     if view.status == JobStatus.RUNNING:
         # A running job shows the chunks finished so far (issue 6: "where partial results exist").
         film = (await run_in_threadpool(jobs.scene, job_id))["film"]  # validated: every field present
+        # A noise-target job replaces its one partial after each round: the round count tells them apart.
+        revision = len(view.noise_target.rounds or []) if view.noise_target is not None else 0
         try:
-            return await run_in_threadpool(cache.get_partial, job_id, film)
+            return await run_in_threadpool(cache.get_partial, job_id, film, revision)
         except ArtifactNotFoundError:
             pass
     raise JobConflictError(
@@ -184,6 +193,7 @@ async def list_layers(request: Request, job_id: JobId, jobs: JobsDep, principal:
     return LayerCatalogue(
         job_id=job_id,
         partial=image.partial,
+        spp=image.spp,
         uploaded=uploads.get(job_id, principal.can_see) is not None,
         exposure_ev=await run_in_threadpool(image.exposure_ev),
         width=image.width,
