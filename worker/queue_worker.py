@@ -78,6 +78,11 @@ from hgcore.store import store_from_settings
 SCHEDULER_LOCK_STALE_S = 10.0
 """A scheduler lock not refreshed for this long belongs to a dead scheduler (a live one refreshes it every
 second, RQ's scheduler interval), and is freed for another worker's scheduler."""
+MAINTENANCE_LOCK_TTL_S = 30
+"""Lifetime of a queue's registry-cleaning lock. RQ gives it 899 s: a worker killed while it cleaned (OOM,
+node loss, SIGKILL) left the lock behind and no worker detected abandoned chunks on that queue for 15
+minutes. Cleaning takes milliseconds; 30 s bounds that blind spot and still never lets two workers clean
+at once."""
 RECONCILE_DUE_KEY = "hgrender:reconcile-due"
 """Exists (with a TTL of ``reconcile_interval_s``) while the last periodic reconciliation is recent."""
 HORSE_TEMP_PREFIX = "hgrender-horse{pid}-"
@@ -108,6 +113,13 @@ class RenderScheduler(RQScheduler):
     def work(self) -> None:
         if die_with_parent(signal.SIGTERM, self.worker_pid):
             super().work()
+
+
+class RenderQueue(Queue):
+    """RQ's queue with a registry-cleaning lock of ``MAINTENANCE_LOCK_TTL_S`` instead of 899 s."""
+
+    def acquire_maintenance_lock(self) -> bool:
+        return bool(self.connection.set(self.registry_cleaning_key, 1, nx=True, ex=MAINTENANCE_LOCK_TTL_S))
 
 
 class RenderWorker(Worker):
@@ -365,7 +377,7 @@ def wait_for_redis(client: redis.Redis, max_backoff_s: float = 5.0) -> None:
 
 
 def build_worker(settings: Settings, client: redis.Redis, name: str | None = None) -> RenderWorker:
-    queues = [Queue(queue_name, connection=client) for queue_name in QUEUE_NAMES]
+    queues = [RenderQueue(queue_name, connection=client) for queue_name in QUEUE_NAMES]
     worker = RenderWorker(
         queues,
         name=name or worker_name(),

@@ -325,3 +325,30 @@ def test_a_chunk_failing_every_retry_fails_the_job_with_its_error(live_service: 
     names = {a["name"] for a in client.artifacts(job_id)}
     assert {"worker.log", "manifest.json"} <= names and "image.exr" not in names
     service.stop_workers()
+
+
+def test_a_worker_killed_while_cleaning_blocks_recovery_for_seconds_not_minutes(
+    live_service: LiveService,
+) -> None:
+    """RQ's registry-cleaning lock lives 899 s: a worker SIGKILLed inside its maintenance pass (found in CI:
+    a test's teardown killed one there) left every worker unable to detect abandoned chunks on that queue
+    for 15 minutes. The render worker's queues take it for MAINTENANCE_LOCK_TTL_S."""
+    from rq import Queue
+
+    from hgcore.settings import QUEUE_NAMES
+    from worker.queue_worker import MAINTENANCE_LOCK_TTL_S, RenderQueue, build_worker
+
+    worker = build_worker(live_service.settings, live_service.redis, name="lock-probe")
+    assert [type(queue) for queue in worker.queues] == [RenderQueue] * len(QUEUE_NAMES)
+    queue = worker.queues[0]
+    live_service.redis.delete(queue.registry_cleaning_key)
+    try:
+        assert queue.acquire_maintenance_lock()
+        assert 0 < live_service.redis.ttl(queue.registry_cleaning_key) <= MAINTENANCE_LOCK_TTL_S <= 60
+        assert not queue.acquire_maintenance_lock()  # still exclusive while it lives
+        queue.release_maintenance_lock()
+        plain = Queue(queue.name, connection=live_service.redis)
+        assert plain.acquire_maintenance_lock()
+        assert live_service.redis.ttl(plain.registry_cleaning_key) > 60  # what RQ alone would leave behind
+    finally:
+        live_service.redis.delete(queue.registry_cleaning_key)
