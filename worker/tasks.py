@@ -43,7 +43,7 @@ from hgcore.artifacts.keys import (
     scene_key,
     worker_log_key,
 )
-from hgcore.artifacts.pixel_sums import PixelSums, partial_writer
+from hgcore.artifacts.pixel_sums import PixelSums, write_partial
 from hgcore.jobs.keys import job_key
 from hgcore.jobs.queue_graph import chunk_rq_id
 from hgcore.jobs.records import JobRecords
@@ -295,12 +295,9 @@ class _RoundPreviews:
     def _publish(self, running: PixelSums, rounds: list[dict[str, Any]]) -> None:
         from worker.render.renderer import tile_rows
 
-        height, width, band_count = running.bands.shape
+        height, width, _ = running.bands.shape
         rows = tile_rows(width, height)
-        with partial_writer(self.path, width, height, band_count) as writer:
-            for y0 in range(0, height, rows):
-                writer.write_rows(running.row_slice(y0, y0 + rows))
-            writer.finish(running.sample_count, rounds[-1]["seconds"], 0, self.seed)
+        write_partial(self.path, running, rounds[-1]["seconds"], 0, self.seed, rows_per_write=rows)
         self.jobs.store.put_file(chunk_key(self.job_id, 0), self.path)
         block = noise_target.summary_block(self.target, running, rounds, None)
         self.jobs.noise_target_round(self.job_id, block)

@@ -239,11 +239,21 @@ class PartialReader:
         return PixelSums.from_table(self.sample_count, self.band_count, table)
 
 
-def write_partial(path: Path, sums: PixelSums, seconds: float, chunk_index: int, seed: int) -> None:
-    """Write a chunk's sums (whole image) and render time (seconds) to ``path`` (.npz, atomic)."""
+def write_partial(
+    path: Path,
+    sums: PixelSums,
+    seconds: float,
+    chunk_index: int,
+    seed: int,
+    rows_per_write: int | None = None,
+) -> None:
+    """Write a chunk's sums (whole image) and render time (seconds) to ``path`` (.npz, atomic);
+    ``rows_per_write`` rows at a time (default: all), so that only that band's float32 table exists."""
     height, width, band_count = sums.bands.shape
+    step = height if rows_per_write is None else max(1, rows_per_write)
     with partial_writer(path, width, height, band_count) as writer:
-        writer.write_rows(sums)
+        for y0 in range(0, height, step):
+            writer.write_rows(sums.row_slice(y0, y0 + step))
         writer.finish(sums.sample_count, seconds, chunk_index, seed)
 
 

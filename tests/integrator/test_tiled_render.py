@@ -122,6 +122,9 @@ def test_partials_stream_by_rows_and_round_like_in_memory_chunks(tmp_path: Path)
     write_partial(tmp_path / "q.npz", sums, 1.0, 0, 0)
     whole, seconds = read_partial(tmp_path / "q.npz")
     assert seconds == 1.0 and np.array_equal(whole.values["depth"], rounded.values["depth"])
+    write_partial(tmp_path / "r.npz", sums, 1.0, 0, 0, rows_per_write=3)  # 3 + 3 + 1 rows
+    banded, _ = read_partial(tmp_path / "r.npz")
+    assert np.array_equal(banded.table(), whole.table())
     assert sorted(np.load(path).files) == [
         "band_count",
         "chunk_index",
