@@ -29,7 +29,7 @@ from hgcore.errors import InputError
 from hgcore.noise_target import NoiseTarget
 from schemas.scene import ABSOLUTE_MAX_SPP, Scene
 from schemas.validation import validate_scene
-from worker.render.renderer import Renderer, tile_rows
+from worker.render.renderer import Renderer, tile_bands
 from worker.render.scene_compiler import SceneCompiler
 
 ProgressCallback = Callable[[float], None]
@@ -186,11 +186,9 @@ def merge_chunks(
     width, height = parsed.film.width, parsed.film.height
     if any((r.width, r.height, r.band_count) != (width, height, parsed.film.bands) for r in readers):
         raise InputError("chunk_paths: a partial's size or bands differ from the scene's film")
-    rows = tile_rows(width, height)
-    row_bands = [(y0, min(y0 + rows, height)) for y0 in range(0, height, rows)]
     return write_merged(
         parsed,
-        iter_merged_rows(readers, row_bands),
+        iter_merged_rows(readers, tile_bands(width, height)),
         out_dir,
         chunks=len(readers),
         render_seconds=lambda: sum(r.seconds for r in readers),
@@ -320,9 +318,7 @@ def render_to_dir(
             target, rounds[-1]["rel_error"], running.sample_count, ABSOLUTE_MAX_SPP
         )
         extra["noise_target"] = noise_target.summary_block(target, running, rounds, reason)
-    rows = tile_rows(renderer.width, renderer.height)
-    total = running
-    row_bands = (total.row_slice(y0, y0 + rows) for y0 in range(0, renderer.height, rows))
+    row_bands = (running.row_slice(y0, y1) for y0, y1 in renderer.tiles())
     return write_merged(
         scene,
         row_bands,

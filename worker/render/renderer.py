@@ -39,6 +39,12 @@ def tile_rows(width: int, height: int) -> int:
     return max(1, min(height, TILE_PIXELS // max(width, 1)))
 
 
+def tile_bands(width: int, height: int) -> list[tuple[int, int]]:
+    """The image's tiles: row bands ``[y0, y1)`` of ``tile_rows(width, height)`` rows, top to bottom."""
+    rows = tile_rows(width, height)
+    return [(y0, min(y0 + rows, height)) for y0 in range(0, height, rows)]
+
+
 def tile_seed(chunk_seed: int, tile_index: int) -> int:
     """The seed of a chunk's tile: the chunk's own for tile 0 (an image of one tile renders the samples it
     rendered before tiling), distinct 32-bit mixes for the others."""
@@ -124,9 +130,8 @@ class Renderer:
         return (right / np.linalg.norm(right)).tolist(), (up / np.linalg.norm(up)).tolist()
 
     def tiles(self) -> list[tuple[int, int]]:
-        """The image's tiles: row bands ``[y0, y1)`` of ``tile_rows(width, height)`` rows, top to bottom."""
-        rows = tile_rows(self.width, self.height)
-        return [(y0, min(y0 + rows, self.height)) for y0 in range(0, self.height, rows)]
+        """The image's tiles (``tile_bands``)."""
+        return tile_bands(self.width, self.height)
 
     def render_sums(
         self,
