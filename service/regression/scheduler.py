@@ -9,9 +9,13 @@
   jobs (cron: ``CronTrigger.from_crontab`` in the schedule's time zone; interval: ``IntervalTrigger`` anchored
   at the schedule's creation time, so every process computes the same due times). Next run times persist in
   the ``RedisJobStore``, so a new leader resumes where the old one stopped.
-* Exactly once: the executor claims each (schedule, due time) with SET NX before it creates the run. A due
-  time fired by a dying leader that had not yet saved its next run time is offered again by its successor
-  and refused by the claim, so restarts never duplicate.
+* Exactly once: the executor claims each (schedule, due time) in Redis, under its own name, before it
+  creates the run. A due time fired by a dying leader that had not yet saved its next run time is offered
+  again by its successor and refused by the claim, so restarts never duplicate. A claim that meets a Redis
+  outage is retried until Redis answers (the same name may claim again, in case only the reply was lost),
+  so an outage delays due times instead of losing them.
+* A Redis outage ends a term as leader, never the scheduler: it stands by and leads again when Redis
+  answers (``RegressionScheduler.run``).
 * Misfire policy: ``coalesce=False`` and ``misfire_grace_time = regression_misfire_grace_s``: after an
   outage every missed due time younger than the grace is run once (oldest first); older ones are skipped and
   logged (APScheduler's EVENT_JOB_MISSED). A paused schedule skips the due times of its pause.
@@ -19,6 +23,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -47,6 +52,8 @@ from service.regression.store import RegressionStore
 LEADER_KEY = "hgrender:regression:scheduler:leader"
 JOBS_KEY = "hgrender:regression:apscheduler:jobs"
 RUN_TIMES_KEY = "hgrender:regression:apscheduler:run_times"
+CLAIM_RETRY_CAP_S = 2.0
+"""Longest wait between two attempts at a due time's claim while Redis is unreachable."""
 SYNC_INTERVAL_S = 1.0
 """How often the leader re-reads the schedules' version counter (new, paused, deleted schedules)."""
 
@@ -78,11 +85,17 @@ def trigger_for(schedule: ScheduleView) -> BaseTrigger:
 
 
 class ClaimingExecutor(BaseExecutor):
-    """Fires each due time of a job once across all processes: claim, then start the run."""
+    """Fires each due time of a job once across all processes: claim, then start the run.
 
-    def __init__(self, runs: RunService) -> None:
+    A claim that fails because Redis is unreachable is retried (back-off up to ``CLAIM_RETRY_CAP_S``)
+    until Redis answers or the scheduler stops: APScheduler moves on to the next due time whatever the
+    executor does, so a claim given up here would lose its due time for good."""
+
+    def __init__(self, runs: RunService, claimer: str, stop_event: threading.Event) -> None:
         super().__init__()
         self.runs = runs
+        self.claimer = claimer
+        self.stop_event = stop_event
 
     def _do_submit_job(self, job: Job, run_times: list[datetime]) -> None:
         events = []
@@ -95,7 +108,7 @@ class ClaimingExecutor(BaseExecutor):
                 )
                 continue
             try:
-                fire_due_run(self.runs, job.id, run_time.timestamp())
+                self._claim_and_fire(job.id, run_time.timestamp())
             except Exception as error:  # one failing schedule must not stop the others
                 log.exception("schedule %s: run at %s not started", job.id, run_time)
                 self._run_job_error(job.id, error)
@@ -103,15 +116,28 @@ class ClaimingExecutor(BaseExecutor):
             events.append(JobExecutionEvent(EVENT_JOB_EXECUTED, job.id, self._jobstore_alias(job), run_time))
         self._run_job_success(job.id, events)
 
+    def _claim_and_fire(self, schedule_id: str, due_at: float) -> None:
+        wait_s = 0.1
+        while True:
+            try:
+                claimed = self.runs.regression.claim_due_time(schedule_id, due_at, self.claimer)
+                break
+            except redis.RedisError:
+                if self.stop_event.wait(wait_s):
+                    raise
+                wait_s = min(2 * wait_s, CLAIM_RETRY_CAP_S)
+        if claimed:
+            # After the claim a failure is not retried: the run may be half-created, and a second one
+            # would break "one run per due time". It is logged by the caller.
+            start_due_run(self.runs, schedule_id, due_at)
+
     @staticmethod
     def _jobstore_alias(job: Job) -> str:
         return getattr(job, "_jobstore_alias", "default")
 
 
-def fire_due_run(runs: RunService, schedule_id: str, due_at: float) -> bool:
-    """Start the run of ``schedule_id`` for ``due_at`` unless another process already did; True if started."""
-    if not runs.regression.claim_due_time(schedule_id, due_at):
-        return False
+def start_due_run(runs: RunService, schedule_id: str, due_at: float) -> None:
+    """Start the run of ``schedule_id`` for ``due_at`` (its claim is this process's)."""
     schedule = runs.regression.get_schedule(schedule_id)
     runs.start_run(
         schedule.suite,
@@ -122,7 +148,6 @@ def fire_due_run(runs: RunService, schedule_id: str, due_at: float) -> bool:
         webhook_url=str(schedule.webhook_url) if schedule.webhook_url else None,
     )
     log.info("schedule %s: started the run due at %s", schedule_id, datetime.fromtimestamp(due_at, UTC))
-    return True
 
 
 def next_run_times(client: redis.Redis) -> dict[str, float]:
@@ -161,7 +186,7 @@ class RegressionScheduler:
         )
         return BackgroundScheduler(
             jobstores={"default": jobstore},
-            executors={"default": ClaimingExecutor(self.runs)},
+            executors={"default": ClaimingExecutor(self.runs, self.name, self.stop_event)},
             job_defaults={
                 "coalesce": False,
                 "misfire_grace_time": self.settings.regression_misfire_grace_s,
@@ -230,16 +255,32 @@ class RegressionScheduler:
             scheduler.shutdown(wait=True)
 
     def run(self) -> None:
-        """Stand by and lead in turn until ``stop_event`` is set."""
+        """Stand by and lead in turn until ``stop_event`` is set.
+
+        Redis going away (the private one restarted by ``serve``, a failover) ends a term as leader, not
+        the scheduler: it logs one line, stands by until Redis answers, and then leads again at once if its
+        lease survived (an AOF restore keeps it: ``renew`` succeeds), or competes for it once it lapsed.
+        """
         log.info("%s started", self.name)
+        redis_down = False
         try:
             while not self.stop_event.is_set():
-                if self.try_acquire():
-                    log.info("%s is the scheduler leader", self.name)
-                    self.lead()
+                try:
+                    leading = self.renew() or self.try_acquire()
+                    if redis_down:
+                        log.info("%s: Redis answers again", self.name)
+                        redis_down = False
+                    if leading:
+                        log.info("%s is the scheduler leader", self.name)
+                        self.lead()
+                except redis.RedisError as error:
+                    if not redis_down:
+                        log.warning("%s: Redis unavailable (%s); standing by", self.name, error)
+                    redis_down = True
                 self.stop_event.wait(min(1.0, self.settings.regression_leader_ttl_s / 3.0))
         finally:
-            self.release()
+            with contextlib.suppress(redis.RedisError):  # Redis gone: the lease lapses by its TTL
+                self.release()
             self.client.close()
 
 

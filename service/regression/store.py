@@ -39,6 +39,12 @@ _BASELINE_KEY = _PREFIX + "baseline:{}"
 
 BASELINE_FILES: tuple[str, ...] = (IMAGE_EXR, VARIANCE_EXR, SUMMARY_JSON)
 FIRED_CLAIM_TTL_S = 90 * 24 * 3600
+_CLAIM_LUA = """
+local holder = redis.call('GET', KEYS[1])
+if not holder then redis.call('SET', KEYS[1], ARGV[1], 'EX', ARGV[2]) return 1 end
+if holder == ARGV[1] then return 1 end
+return 0
+"""
 """How long a due-time claim is kept (longer than any misfire grace, so a claim outlives every retry)."""
 
 
@@ -64,6 +70,7 @@ class RegressionStore:
     def __init__(self, client: redis.Redis, store: ArtifactStore) -> None:
         self.client = client
         self.store = store
+        self._claim = client.register_script(_CLAIM_LUA)
 
     # ---- schedules ------------------------------------------------------------------------------------
 
@@ -107,10 +114,14 @@ class RegressionStore:
     def schedules_version(self) -> int:
         return int(self.client.get(_VERSION_KEY) or 0)
 
-    def claim_due_time(self, schedule_id: str, due_at: float) -> bool:
-        """True for exactly one caller per (schedule, due time): the one that must create its run."""
+    def claim_due_time(self, schedule_id: str, due_at: float, claimer: str = "") -> bool:
+        """True for exactly one ``claimer`` per (schedule, due time): the one that must create its run.
+        The same claimer asking again is told True again, so a claim whose reply a Redis outage lost can
+        be retried (``claimer``: the scheduler's unique name; "" claims anonymously, once)."""
         key = _FIRED_KEY.format(schedule_id, f"{due_at:.3f}")
-        return bool(self.client.set(key, "1", nx=True, ex=FIRED_CLAIM_TTL_S))
+        if not claimer:
+            return bool(self.client.set(key, "1", nx=True, ex=FIRED_CLAIM_TTL_S))
+        return bool(self._claim(keys=[key], args=[claimer, FIRED_CLAIM_TTL_S]))
 
     # ---- runs -----------------------------------------------------------------------------------------
 

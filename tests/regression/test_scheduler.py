@@ -22,6 +22,7 @@ import redis
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from hgrender.cli.service import worker_command_line
+from service.redis_server import RedisServer
 from service.regression.models import ScheduleCreate, Suite, SuiteScene
 from service.regression.store import RegressionStore
 
@@ -131,3 +132,47 @@ def test_pause_skips_due_times_and_resume_continues_on_the_grid(settings: Settin
     after = [t for t in times if t > paused_at + 1.0]
     assert after and all(t > resumed_at for t in after)  # the pause's due times were skipped, not caught up
     assert len(set(times)) == len(times)
+
+
+def test_a_redis_restart_under_a_running_scheduler_is_stood_out_not_fatal(tmp_path: Path) -> None:
+    """The private Redis of ``hgrender serve`` restarts (it died, serve starts it again on the same port
+    and data dir): the scheduler logs one line, stands by, leads again once Redis answers, and the due
+    times go on, each once. Before, the first ``ConnectionError`` ended the scheduler with a traceback."""
+    server = RedisServer(tmp_path / "redis").start()
+    settings = Settings(redis_url=server.url, data_dir=tmp_path, regression_leader_ttl_s=1.5)
+    store, schedule_id, created_at = make_schedule(settings)
+    scheduler = start_scheduler(settings, "sched-outage")
+    try:
+        # Kill Redis between due times, not inside one: a run whose claim is made but whose creation
+        # Redis cuts short is logged and not retried (a second attempt could create a second run).
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            times = due_times(store, schedule_id)
+            if times and 0.2 < time.time() - times[-1] < 0.8 * INTERVAL_S:  # caught up, next one ahead
+                break
+            time.sleep(0.02)
+        assert due_times(store, schedule_id), "the scheduler never fired"
+        assert server.process is not None
+        server.process.kill()  # appendfsync always: everything acknowledged is in the AOF
+        server.process.wait()
+        time.sleep(INTERVAL_S + 1.0)  # down across a due time
+        assert scheduler.poll() is None, "the scheduler exited when Redis went away"
+        server = RedisServer(tmp_path / "redis", port=server.port).start()
+        fired_after_restart = len(due_times(store, schedule_id))
+        time.sleep(3 * INTERVAL_S + 2.0)
+        assert scheduler.poll() is None
+    finally:
+        stop(scheduler)
+        server.stop()
+    log = (tmp_path / "sched-outage.log").read_text()
+    assert "Traceback" not in log, log
+    assert log.count("Redis unavailable") == 1, log
+    assert "Redis answers again" in log, log
+    server = RedisServer(tmp_path / "redis", port=server.port).start()  # same port: `store` reconnects
+    try:
+        times = due_times(store, schedule_id)
+    finally:
+        server.stop()
+    # The due time missed while Redis was down is run late (misfire grace), once; the rest on time.
+    assert len(times) >= fired_after_restart + 3
+    assert_every_due_time_once(times, created_at, expected_at_least=3)
