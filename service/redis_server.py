@@ -102,7 +102,11 @@ class RedisServer:
         self.data_dir.mkdir(parents=True, exist_ok=True)
         for pid in servers_working_in(self.data_dir):
             _stop_pid(pid, timeout_s)
-        self.process = subprocess.Popen(self.command(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        # Its own session: a terminal's Ctrl-C reaches `serve`, which stops this server last (its workers
+        # hand their chunks back through it first), not this server at once.
+        self.process = subprocess.Popen(
+            self.command(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True
+        )
         deadline = time.monotonic() + timeout_s
         client = redis_client(self.url, socket_connect_timeout=0.5)
         try:

@@ -102,11 +102,18 @@ class WorkerSupervisor:
         self.processes: list[subprocess.Popen[bytes]] = []
         self._backoffs = [RestartBackoff() for _ in range(count)]
         self._stop = threading.Event()
+        # Held while a worker is replaced and while stop() begins: no replacement may start after stop()
+        # has listed the workers it terminates and waits for (it would outlive serve's Redis).
+        self._spawning = threading.Lock()
         self._thread = threading.Thread(target=self._supervise, name="worker-supervisor", daemon=True)
 
     def _spawn(self) -> subprocess.Popen[bytes]:
         # A worker outlives no `serve` (not even a SIGKILLed one): it shuts down when its parent dies.
-        return subprocess.Popen(worker_command_line("--exit-with", str(os.getpid())), env=self.env)
+        # Its own session keeps a terminal's Ctrl-C (SIGINT to the whole foreground group) from reaching
+        # it beside serve's SIGTERM: two signals would make RQ's shutdown a cold one.
+        return subprocess.Popen(
+            worker_command_line("--exit-with", str(os.getpid())), env=self.env, start_new_session=True
+        )
 
     def start(self) -> None:
         self.processes = [self._spawn() for _ in range(self.count)]
@@ -116,25 +123,27 @@ class WorkerSupervisor:
         dead: set[int] = set()
         while not self._stop.wait(SUPERVISION_INTERVAL_S):
             for i, process in enumerate(self.processes):
-                if process.poll() is None or self._stop.is_set():
-                    continue
-                if i not in dead:
-                    log.warning(
-                        "worker pid %d exited with %s; restarting it", process.pid, process.returncode
-                    )
-                    self._backoffs[i].died()
-                    dead.add(i)
-                if self._backoffs[i].may_start():
-                    self.processes[i] = self._spawn()
-                    self._backoffs[i].restarted()
-                    dead.discard(i)
+                with self._spawning:
+                    if process.poll() is None or self._stop.is_set():
+                        continue
+                    if i not in dead:
+                        log.warning(
+                            "worker pid %d exited with %s; restarting it", process.pid, process.returncode
+                        )
+                        self._backoffs[i].died()
+                        dead.add(i)
+                    if self._backoffs[i].may_start():
+                        self.processes[i] = self._spawn()
+                        self._backoffs[i].restarted()
+                        dead.discard(i)
         # Linux signals a child's parent death when the *thread* that started it ends: this thread stays
         # (parked, a daemon) so the workers it restarted are not told to stop twice (a cold shutdown).
         threading.Event().wait()
 
     def stop(self, timeout_s: float = 30.0) -> None:
         """Warm shutdown (SIGTERM: RQ finishes nothing new and exits), SIGKILL after ``timeout_s``."""
-        self._stop.set()
+        with self._spawning:
+            self._stop.set()
         for process in self.processes:
             if process.poll() is None:
                 process.terminate()
@@ -147,7 +156,9 @@ class WorkerSupervisor:
 
 class RedisSupervisor:
     """Restarts the private Redis when it dies (same port, same data dir: its AOF restores every job),
-    with bounded back-off, then reconciles the jobs' queue state (``hgcore.jobs.reconcile``)."""
+    with bounded back-off, then reconciles the jobs' queue state (``hgcore.jobs.reconcile``). ``stop()``
+    ends the supervision only: ``serve`` calls it when its shutdown begins, so that a Redis ending then is
+    not started again, and stops the server itself after the workers."""
 
     def __init__(self, server: Any, settings: Any) -> None:
         self.server = server
@@ -219,6 +230,12 @@ def _exit_on_signal(signum: int, _frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
+SHUTDOWN_SIGNALS = (signal.SIGTERM, signal.SIGINT)
+"""uvicorn shuts down gracefully on these, then re-raises the signal; ``_exit_on_signal`` turns that into
+SystemExit (no KeyboardInterrupt traceback for a Ctrl-C), so the workers and the private Redis are stopped
+in order by ``serve_command``'s ``finally``."""
+
+
 def serve_command(args: argparse.Namespace) -> int:
     import uvicorn
 
@@ -257,9 +274,8 @@ def serve_command(args: argparse.Namespace) -> int:
         supervisor.start()
         # The regression scheduler (issue 7), leader-elected: several `serve` processes fire each run once.
         scheduler = start_scheduler_thread(settings)[0] if settings.regression_scheduler else None
-        # uvicorn shuts down gracefully on SIGTERM, then re-raises the signal; with this handler that
-        # becomes SystemExit here, so the workers and the private Redis below are stopped too.
-        signal.signal(signal.SIGTERM, _exit_on_signal)
+        for signum in SHUTDOWN_SIGNALS:
+            signal.signal(signum, _exit_on_signal)
         app = create_app(settings)
         # What exists now lives as long as the process: freeze it out of the cyclic collector, whose full
         # passes over these ~10^5 startup objects would otherwise stall requests for tens of ms (p99).
@@ -269,6 +285,9 @@ def serve_command(args: argparse.Namespace) -> int:
             uvicorn.run(app, host=args.host, port=args.port, log_level="warning", access_log=False)
         finally:
             gc.unfreeze()  # let interpreter shutdown collect them (native bindings check for leaks)
+            log.info("shutting down: regression scheduler, workers, then the private Redis")
+            if redis_supervisor is not None:
+                redis_supervisor.stop()  # the workers still need Redis, but it is not restarted any more
             if scheduler is not None:
                 scheduler.stop_event.set()
             # Room for each worker's graceful shutdown: its grace, the heartbeat tick that hands the chunk

@@ -41,7 +41,8 @@ def start_serve(
         str(workers),
     ]
     log = (data_dir.parent / f"serve-{port}.log").open("ab")
-    process = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+    # Its own process group, as a shell runs a foreground command (a terminal's Ctrl-C signals the group).
+    process = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
 
     def ready() -> bool:
         if process.poll() is not None:
@@ -148,3 +149,28 @@ def test_a_sigkilled_serve_leaves_no_worker_and_its_redis_is_replaced(tmp_path: 
         for pid in [*workers, *redis_servers_in(data_dir / "redis")]:  # whatever a failure left behind
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_ctrl_c_stops_serve_in_order_without_restarting_redis_or_a_traceback(tmp_path: Path) -> None:
+    """A terminal's Ctrl-C sends SIGINT to serve's whole process group. Serve alone gets it (its workers
+    and private Redis run in sessions of their own) and stops the scheduler, then the workers, then
+    Redis: before, Redis died with the group at once, serve restarted it during its own shutdown, and
+    the regression scheduler's thread died with a ConnectionError traceback."""
+    data_dir = tmp_path / "data"
+    port = free_loopback_port()
+    serve = start_serve(data_dir, port, workers=1)
+    workers = children_of(serve.pid)
+    redis_pids = redis_servers_in(data_dir / "redis")
+    assert len(redis_pids) == 1
+    try:
+        os.killpg(serve.pid, signal.SIGINT)
+        assert serve.wait(timeout=60) == 128 + signal.SIGINT
+    finally:
+        for pid in [*workers, *redis_servers_in(data_dir / "redis")]:  # whatever a failure left behind
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    log = (tmp_path / f"serve-{port}.log").read_text()
+    assert "restarting" not in log, log
+    assert "Traceback" not in log, log
+    assert "shutting down" in log, log
+    assert not [p for p in [*workers, *redis_pids] if is_alive(p)]
