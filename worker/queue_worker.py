@@ -49,6 +49,7 @@ import shutil
 import signal
 import socket
 import tempfile
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -87,6 +88,8 @@ RECONCILE_DUE_KEY = "hgrender:reconcile-due"
 """Exists (with a TTL of ``reconcile_interval_s``) while the last periodic reconciliation is recent."""
 HORSE_TEMP_PREFIX = "hgrender-horse{pid}-"
 """Prefix of the temporary folders of the work horse with process id ``pid`` (``worker.tasks``)."""
+SCHEDULER_STOP_DEADLINE_S = 5.0
+"""Longest a scheduler child takes to stop once asked (it exits then, its locks left to lapse)."""
 _PR_SET_PDEATHSIG = 1
 _REDIS_BACKOFF_CAP_S = 1.0
 
@@ -113,6 +116,16 @@ class RenderScheduler(RQScheduler):
     def work(self) -> None:
         if die_with_parent(signal.SIGTERM, self.worker_pid):
             super().work()
+
+    def request_stop(self, signum: int | None = None, frame: FrameType | None = None) -> None:
+        """RQ's graceful stop (release the locks at the next loop), with a deadline: with Redis gone the
+        release would retry for the client's whole outage window, long after the worker and `serve` have
+        ended. The locks lapse by their TTL, and the next scheduler frees them
+        (``free_stale_scheduler_locks``)."""
+        super().request_stop(signum, frame)
+        deadline = threading.Timer(SCHEDULER_STOP_DEADLINE_S, os._exit, args=(0,))
+        deadline.daemon = True
+        deadline.start()
 
 
 class RenderQueue(Queue):

@@ -163,6 +163,16 @@ def children_of(pid: int) -> list[int]:
     ]
 
 
+def describe_process(pid: int) -> str:
+    """``pid``, its state, parent and command line (Linux /proc), for failure messages."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        command = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except (OSError, IndexError):
+        return f"{pid} (gone)"
+    return f"{pid} state {fields[0]} parent {fields[1]}: {command.strip()[:160]}"
+
+
 def is_alive(pid: int) -> bool:
     """Whether process ``pid`` runs (a zombie does not)."""
     try:

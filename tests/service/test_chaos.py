@@ -31,7 +31,7 @@ import redis
 from hgcore.jobs.keys import chunks_key, job_key
 from hgrender.client import HgrenderClient
 from service.redis_server import free_loopback_port
-from tests.service.conftest import children_of, is_alive, tiny_scene, wait_for
+from tests.service.conftest import children_of, describe_process, is_alive, tiny_scene, wait_for
 from tests.service.test_serve import redis_servers_in, start_serve, stop_serve
 
 pytestmark = pytest.mark.slow
@@ -251,4 +251,13 @@ def test_every_job_succeeds_exactly_once_under_chaos(tmp_path: Path) -> None:
         chaos.seen.update(chaos.workers())
         chaos.seen.update(redis_servers_in(data_dir / "redis"))
         stop_serve(chaos.serve)
-    wait_for(lambda: not [p for p in chaos.seen if is_alive(p)], 15, "every process seen to be gone")
+    deadline = time.monotonic() + 15
+    while (lingering := [p for p in chaos.seen if is_alive(p)]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    serve_log = (data_dir.parent / f"serve-{chaos.port}.log").read_text(errors="replace").splitlines()
+    assert not lingering, (
+        "still running 15 s after serve stopped:\n"
+        + "\n".join(describe_process(p) for p in lingering)
+        + "\nthe end of serve's log:\n"
+        + "\n".join(serve_log[-60:])
+    )

@@ -379,3 +379,36 @@ def test_a_worker_waits_for_redis_instead_of_crash_looping(live_service: LiveSer
             live_service.stop_workers()
     finally:
         live_service.stop_workers()
+
+
+@pytest.mark.slow
+def test_a_scheduler_asked_to_stop_without_redis_exits_within_its_deadline(
+    live_service: LiveService, tmp_path: Path
+) -> None:
+    """Its worker dies while Redis is down (``serve`` stops its private Redis right after its workers):
+    the scheduler child, told by the kernel (SIGTERM), would retry releasing its locks for the workers'
+    whole Redis outage window (30 s); it exits after ``SCHEDULER_STOP_DEADLINE_S`` instead."""
+    from service.redis_server import RedisServer
+    from worker.queue_worker import SCHEDULER_STOP_DEADLINE_S
+
+    server = RedisServer(tmp_path / "own-redis").start()
+    try:
+        client = redis.Redis.from_url(server.url)
+        worker = live_service.start_worker("stranded", REDIS_URL=server.url)
+        lock = RQScheduler.get_locking_key("default")
+        holder = wait_for(lambda: client.get(lock), 30, "the scheduler lock")
+        scheduler_pid = wait_for(
+            lambda: int(client.hget(f"rq:scheduler:{holder.decode()}", "pid") or 0), 30, "the scheduler pid"
+        )
+        client.close()
+        assert server.process is not None
+        server.process.kill()
+        server.process.wait()
+        os.kill(worker.pid, signal.SIGKILL)
+        worker.wait()
+        stopped_at = time.monotonic()
+        wait_for(lambda: not is_alive(scheduler_pid), 30, "the scheduler child to exit")
+        assert time.monotonic() - stopped_at <= SCHEDULER_STOP_DEADLINE_S + 2.0
+    finally:
+        live_service.stop_workers()
+        server.stop()
