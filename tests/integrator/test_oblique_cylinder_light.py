@@ -210,3 +210,26 @@ def test_exact_and_rectangle_modes_predict_different_fringes() -> None:
     """The two predictions differ by far more than the end-to-end tolerance (that test can fail)."""
     exact, rectangle = exact_and_rectangle_predictions()
     assert np.sum(np.abs(exact - rectangle) > 0.01 * exact) >= 3, (exact, rectangle)  # 2.4–2.6 % in 3 bands
+
+
+def test_rectangles_beside_a_cylinder_keep_the_rectangle_modes() -> None:
+    """In a scene with both, the per-lane coefficients of a rectangle's lanes are the universal ones."""
+    mi = load_mitsuba()
+    records = [
+        EmitterRecord(
+            EmitterKind.CYLINDER, (0.0, 0.0, 0.0), axis=(0.0, 0.6, 0.8), radius_m=0.01, length_m=0.02
+        ),
+        EmitterRecord(EmitterKind.RECTANGLE, (0.0, 0.0, 1.0), width_m=0.3, height_m=0.1),
+    ]
+    modes = CylinderModes.for_scene(mi, {EmitterKind.CYLINDER, EmitterKind.RECTANGLE}, MODES)
+    lanes = mi.UInt32([0, 1])
+    frame_x, frame_y = (
+        mi.Vector3f([1.0, 1.0], [0.0, 0.0], [0.0, 0.0]),
+        mi.Vector3f([0.0, 0.0], [1.0, 1.0], 0.0),
+    )
+    values = modes.coefficients(mi, mi.Float(EmitterTable(records).flat()), lanes, frame_x, frame_y)
+    rectangle = source_coefficients("rect", MODES)
+    assert all(
+        abs(float(np.asarray(value)[1]) - rectangle[mode]) <= FLOAT32_ERROR for mode, value in values.items()
+    )
+    assert max(abs(float(np.asarray(value)[0]) - rectangle[mode]) for mode, value in values.items()) > 0.1

@@ -141,7 +141,10 @@ class CylinderModes:
         sin_theta = dr.sqrt(dr.minimum(sin_theta2, 1.0))
         cos_theta = dr.sqrt(dr.maximum(1.0 - sin_theta2, 0.0))
         sigma_uu, sigma_vv = sources.cylinder_silhouette_moments(radius, length, sin_theta, cos_theta)
+        cylinder = mi.UInt32(read(KIND)) == int(EmitterKind.CYLINDER)
         alpha = sources.open_cylinder_obliquity(radius, length, sin_theta, cos_theta, drjit_ops())
+        # Other kinds store R = L = 0 (atan2(0, 0)): any node would do, but keep the index finite.
+        alpha = dr.select(cylinder & dr.isfinite(alpha), alpha, 0.0)
         position = alpha * ((self.samples - 1) / (0.5 * dr.pi))
         node = mi.UInt32(dr.clip(dr.floor(position), 0.0, self.samples - 2.0))
         weight = position - mi.Float(node)
@@ -149,7 +152,6 @@ class CylinderModes:
         width = len(self.modes)
         low_row = (node * 2 + label) * width
         high_row = low_row + 2 * width
-        cylinder = mi.UInt32(read(KIND)) == int(EmitterKind.CYLINDER)
         result = {}
         for column, mode in enumerate(self.modes):
             low = dr.gather(mi.Float, self.values, low_row + column)
