@@ -106,12 +106,14 @@ def _load_libraries() -> None:
 
 def _fill_caches() -> None:
     from hgcore.optics import ior, spectra
-    from hgcore.optics.sources import source_coefficients
+    from hgcore.optics.sources import open_cylinder_coefficient_table, source_coefficients
 
-    # The renderer's disk and rectangle source expansions (~3 ms each).
+    # The renderer's disk and rectangle source expansions (~3 ms each) and the open cylinder's mode tables
+    # (one exact-integration pass over the obliquities, ~0.9 s, then ~5 ms per mode count).
     for modes in range(1, MAX_FILM_MODES + 1):
         source_coefficients("disk", modes)
         source_coefficients("rect", modes)
+        open_cylinder_coefficient_table(modes)
     # Data tables: CIE colour matching functions, illuminants, metals' refractive indices.
     spectra.cie_cmf(550.0)
     for illuminant in spectra.ILLUMINANTS:

@@ -17,6 +17,7 @@ modes of ``hgcore.optics.array_ops.transverse_modes`` only, and ``project_onto``
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
 from typing import Any
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from hgcore.errors import InputError
-from hgcore.optics.array_ops import NUMPY, ArrayOps, transverse_modes
+from hgcore.optics.array_ops import NUMPY, ArrayOps, hermite_functions, transverse_modes
 from hgcore.optics.hg import MultiIndex, dual_hg_functions, hg_functions
 
 DEFAULT_QUADRATURE_POINTS = 64
@@ -89,6 +90,30 @@ def project_csd(
     if np.shape(theta) != (2, 2):
         raise InputError(f"theta: a transverse CSD needs a 2x2 shape matrix, got shape {np.shape(theta)}")
     return project_onto(function, theta, transverse_modes(mode_count), quadrature_points)
+
+
+def whitened_quadrature(quadrature_points: int = DEFAULT_QUADRATURE_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes x_i and weights W_i of :func:`project_onto`'s rule along one axis for Θ = I (x = √2 y,
+    W = √2 w e^{y²}, (y, w) the Gauss–Hermite rule), symmetric about 0 (x_{n−1−i} = −x_i)."""
+    nodes, weights = _gauss_hermite(quadrature_points)
+    return math.sqrt(2.0) * nodes, math.sqrt(2.0) * weights * np.exp(nodes * nodes)
+
+
+def project_whitened_grid(
+    values: np.ndarray, mode_count: int, quadrature_points: int = DEFAULT_QUADRATURE_POINTS
+) -> np.ndarray:
+    """:func:`project_csd` for Θ = I of a function given on the tensor grid of :func:`whitened_quadrature`
+    (``values[i, j]`` = f(x_i, x_j)): ⟨f | h_n h_m⟩ for the modes of ``transverse_modes(mode_count)``.
+
+    With Θ = I the basis is the product of the orthonormal Hermite functions h_n(x₁) h_m(x₂), so the rule
+    separates: p = Aᵀ F A with A_in = W_i h_n(x_i) — the same sums as ``project_csd`` in O(n²·modes).
+    """
+    nodes, weights = whitened_quadrature(quadrature_points)
+    degrees = transverse_modes(mode_count)
+    hermite = np.array(hermite_functions(nodes, max(max(n, m) for n, m in degrees), NUMPY))
+    weighted = hermite * weights  # [degree, node]
+    projections = weighted @ np.asarray(values, dtype=float) @ weighted.T
+    return np.array([projections[n, m] for n, m in degrees])
 
 
 def reconstruct(

@@ -31,13 +31,13 @@ coherence of each kind is a universal function, so its coefficients ĉ_nm are co
   disk (sphere, disk):          2J₁(v)/v with v = 2|u|   (Σ = R²/4 ⇒ v = R|k ξ/r| = 2|u|),
   rect (rectangle, cylinder):   sinc(√3 u₁) sinc(√3 u₂)  (w²/12 ⇒ w ζ/2 = √3 u),
   gaussian:                     exp(−|u|²/2).
-A cylinder uses the rectangle kind: side-on (Fig. 7's case) its radiating surface projects onto the uniform
-strip 2R × L; for oblique views the 0th mode, which depends on Σ alone, is exact, higher modes are those of
-the rectangle with that Σ (an approximation: the projected region is a rectangle with a half-disk moved from
-one end to the other). ``open_cylinder_angular_coherence`` gives that region's f̃ exactly (complex: the region
-has no centre of symmetry) and ``open_cylinder_coefficients`` its even modes by exact integration, one set per
-view angle (RMS error over |u| ≤ 3 at 16 modes: 0.014 at 10°, where the rectangle's are 0.049); wiring them
-into the kernels needs a per-angle table (issue 12 notes). The rectangle's whitened square is
+A cylinder is the rectangle kind side-on (Fig. 7's case: its radiating surface projects onto the uniform
+strip 2R × L); seen obliquely the projected region is a rectangle with a half-disk moved from one end to the
+other. ``open_cylinder_angular_coherence`` gives that region's f̃ exactly (complex: the region has no centre
+of symmetry) and ``open_cylinder_coefficients`` its even modes by exact integration, one set per view angle
+(RMS error over |u| ≤ 3 at 16 modes: 0.014 at 10°, where the rectangle's are 0.049). After whitening the
+region depends on b/ℓ alone (``open_cylinder_obliquity``), so the kernels interpolate one table over it
+(``open_cylinder_coefficient_table``; error bound below). The rectangle's whitened square is
 assumed aligned with Σ's principal axes (a rectangle seen face-on, or its edges' projections orthogonal).
 Coefficients are the L²-closest expansion subject to μ(0) = Σ ĉ h_n(0) h_m(0) = 1 (a Lagrange-multiplier
 correction of the projection; see ``_normalised_coefficients``).
@@ -58,8 +58,8 @@ import numpy as np
 from scipy.special import j1
 
 from hgcore.errors import InputError
-from hgcore.optics.array_ops import NUMPY, ArrayOps, hermite_functions
-from hgcore.optics.expansion import project_csd
+from hgcore.optics.array_ops import NUMPY, ArrayOps, hermite_functions, transverse_modes
+from hgcore.optics.expansion import project_csd, project_whitened_grid, whitened_quadrature
 from hgcore.optics.frames import Vector3, cross3, dot3, transverse_frame, unit_vector
 
 SOURCE_KINDS = ("sphere", "cylinder", "disk", "rect", "gaussian")
@@ -320,19 +320,25 @@ def _normalised_coefficients(coefficient_kind: str, mode_count: int) -> tuple[tu
 def _constrained_expansion(
     whitened: Callable[[np.ndarray, np.ndarray], np.ndarray], mode_count: int
 ) -> tuple[tuple[int, int, float], ...]:
-    """L²-closest expansion of a whitened f̃ subject to μ(0) = Σ ĉ_nm h_n(0) h_m(0) = 1.
-
-    With the orthonormal projection p = ⟨f̃ | h_n h_m⟩ and a_nm = h_n(0) h_m(0), the constrained minimiser
-    of ‖f̃ − Σ ĉ h_n h_m‖² is ĉ = p + λa with λ = (1 − a·p)/(a·a) (one Lagrange multiplier). Because the
-    mode sets are nested, its L² error cannot grow as modes are added, unlike a plain rescaling of p.
-    """
+    """L²-closest expansion of a whitened f̃ subject to μ(0) = Σ ĉ_nm h_n(0) h_m(0) = 1 (``_constrain``)."""
     projected = project_csd(whitened, np.eye(2), mode_count)
     degrees = list(projected)
+    return _constrain(degrees, np.array([projected[degree] for degree in degrees]))
+
+
+def _constrain(
+    degrees: Sequence[tuple[int, int]], projected: np.ndarray
+) -> tuple[tuple[int, int, float], ...]:
+    """The constrained coefficients ĉ of the orthonormal projections p = ⟨f̃ | h_n h_m⟩ onto ``degrees``.
+
+    With a_nm = h_n(0) h_m(0), the minimiser of ‖f̃ − Σ ĉ h_n h_m‖² subject to a·ĉ = 1 is ĉ = p + λa with
+    λ = (1 − a·p)/(a·a) (one Lagrange multiplier). Because the mode sets are nested, its L² error cannot grow
+    as modes are added, unlike a plain rescaling of p. ĉ is affine in p.
+    """
     h_at_zero = hermite_functions(0.0, max(max(n, m) for n, m in degrees), NUMPY)
     at_origin = np.array([h_at_zero[n] * h_at_zero[m] for n, m in degrees])
-    values = np.array([projected[degree] for degree in degrees])
-    multiplier = (1.0 - float(at_origin @ values)) / float(at_origin @ at_origin)
-    normalised = values + multiplier * at_origin
+    multiplier = (1.0 - float(at_origin @ projected)) / float(at_origin @ at_origin)
+    normalised = projected + multiplier * at_origin
     return tuple((n, m, float(value)) for (n, m), value in zip(degrees, normalised, strict=True))
 
 
@@ -394,6 +400,38 @@ def open_cylinder_angular_coherence(
     return np.exp(1j * zeta_u * (0.25 * math.pi * end_semi_axis)) * value
 
 
+def open_cylinder_obliquity(
+    radius_m: Any, length_m: Any, sin_theta: Any, cos_theta: Any, ops: ArrayOps = NUMPY
+) -> Any:
+    """α = atan2(b, ℓ) = atan2(R cosθ, L sinθ) ∈ [0, π/2] (rad): the one parameter of the whitened region.
+
+    Whitening scales û by 1/√Σ_uu and v by 1/√Σ_vv, so the whitened region (rectangle ℓ × 2R, half-ellipses
+    of semi-axes b, R) depends on the aspect b/ℓ = tan α alone: one table over α serves every cylinder.
+    α = 0 side-on (the rectangle), α → π/2 towards end-on (a thin crescent; the limit is finite).
+    """
+    return ops.atan2(radius_m * cos_theta, length_m * sin_theta)
+
+
+def _open_cylinder_projections_at(
+    radius_m: float, length_m: float, sin_theta: float, mode_count: int
+) -> np.ndarray:
+    """p_nm = ⟨Re f̃/f̃(0) | h_n h_m⟩ of an open cylinder in whitened coordinates, u₁ along û and u₂ along v,
+    for the modes of ``transverse_modes(mode_count)`` (``expansion.project_whitened_grid``).
+
+    Re f̃ is even in each axis (``open_cylinder_coefficient_table``), so it is evaluated on the quadrature
+    grid's positive quadrant only and mirrored (the rule's nodes are symmetric).
+    """
+    cos_theta = math.sqrt(max(1.0 - sin_theta * sin_theta, 0.0))
+    sigma_uu, sigma_vv = cylinder_silhouette_moments(radius_m, length_m, sin_theta, cos_theta)
+    nodes, _ = whitened_quadrature()
+    count = len(nodes)
+    positive = nodes[count // 2 :]
+    mirror = np.maximum(np.arange(count), count - 1 - np.arange(count)) - count // 2
+    along, across = np.meshgrid(positive / math.sqrt(sigma_uu), positive / math.sqrt(sigma_vv), indexing="ij")
+    quadrant = np.real(open_cylinder_angular_coherence(radius_m, length_m, sin_theta, along, across))
+    return project_whitened_grid(quadrant[np.ix_(mirror, mirror)], mode_count)
+
+
 def open_cylinder_coefficients(
     radius_m: float, length_m: float, sin_theta: float, mode_count: int
 ) -> dict[tuple[int, int], float]:
@@ -409,13 +447,76 @@ def open_cylinder_coefficients(
         raise InputError(f"mode_count: must be an integer in 1..{MAX_MODES}, got {mode_count!r}")
     cos_theta = math.sqrt(max(1.0 - sin_theta * sin_theta, 0.0))
     sigma_uu, sigma_vv = cylinder_silhouette_moments(radius_m, length_m, sin_theta, cos_theta)
-    u_is_major = sigma_uu >= sigma_vv
-    scale_major = 1.0 / math.sqrt(sigma_uu if u_is_major else sigma_vv)
-    scale_minor = 1.0 / math.sqrt(sigma_vv if u_is_major else sigma_uu)
+    degrees = transverse_modes(mode_count)
+    # p in the (û, v) order; where v is the major axis, u₁ runs along v: p_nm(v, û) = p_mn(û, v).
+    order = degrees if sigma_uu >= sigma_vv else [(m, n) for n, m in degrees]
+    projected = _open_cylinder_projections_at(radius_m, length_m, sin_theta, MAX_MODES)
+    columns = [transverse_modes(MAX_MODES).index(degree) for degree in order]
+    return {(n, m): value for n, m, value in _constrain(degrees, projected[columns])}
 
-    def whitened(u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
-        zeta_major, zeta_minor = u1 * scale_major, u2 * scale_minor
-        zeta_u, zeta_v = (zeta_major, zeta_minor) if u_is_major else (zeta_minor, zeta_major)
-        return np.real(open_cylinder_angular_coherence(radius_m, length_m, sin_theta, zeta_u, zeta_v))
 
-    return {(n, m): value for n, m, value in _constrained_expansion(whitened, mode_count)}
+# The kernels' open-cylinder modes: ĉ(α) tabulated at OPEN_CYLINDER_TABLE_SAMPLES uniform α ∈ [0, π/2] and
+# interpolated linearly. Measured (bench/bench_cylinder_modes.py, the interpolant at every midpoint against
+# exact integration there): at 65 samples max |Δĉ_nm| 9.3e-4 and max Σ_nm |Δĉ_nm| 3.1e-3 over every mode
+# count 1–16 and both labels (both largest near end-on, α ≈ 89°; 33 samples: 3.7e-3 / 1.2e-2, error ∝ h²).
+# With |h_n| ≤ π^{-1/4} (Cramér) this bounds |Δμ| ≤ Σ|Δĉ|/√π ≤ 1.8e-3 everywhere, below the 16-mode
+# expansion's own error (RMS 0.014 over |u| ≤ 3 at 10°).
+OPEN_CYLINDER_TABLE_SAMPLES = 65
+OPEN_CYLINDER_TABLE_MAX_ABS_ERROR = 9.3e-4
+OPEN_CYLINDER_TABLE_SUM_ABS_ERROR = 3.1e-3
+# End-on (α = π/2) the region's limit is taken at θ = 1e-6 rad (b/ℓ = 1e6): the shape differs from the
+# limit by O(1e-6).
+_END_ON_LIMIT_RAD = 1e-6
+
+
+def open_cylinder_table_obliquities(samples: int = OPEN_CYLINDER_TABLE_SAMPLES) -> np.ndarray:
+    """The table's nodes α_i = i·(π/2)/(samples − 1), rad."""
+    return np.linspace(0.0, 0.5 * math.pi, samples)
+
+
+def _open_cylinder_at_obliquity(alpha: float) -> tuple[float, float, float]:
+    """(R, L, sinθ) of a representative cylinder at obliquity α: R = L = 1, θ = π/2 − α (clamped end-on)."""
+    theta = max(0.5 * math.pi - alpha, _END_ON_LIMIT_RAD)
+    return 1.0, 1.0, math.sin(theta)
+
+
+@lru_cache(maxsize=4)
+def _open_cylinder_projections(samples: int) -> np.ndarray:
+    """p_nm(α_i) in the (û, v) order for the modes of ``transverse_modes(MAX_MODES)``, one row per node.
+
+    The projections onto a prefix of the modes are a prefix of these, so one pass serves every mode count
+    (~10 ms per node).
+    """
+    return np.array(
+        [
+            _open_cylinder_projections_at(*_open_cylinder_at_obliquity(float(alpha)), MAX_MODES)
+            for alpha in open_cylinder_table_obliquities(samples)
+        ]
+    )
+
+
+@lru_cache(maxsize=2 * MAX_MODES)
+def open_cylinder_coefficient_table(
+    mode_count: int, samples: int = OPEN_CYLINDER_TABLE_SAMPLES
+) -> tuple[tuple[tuple[int, int], ...], np.ndarray]:
+    """(modes, table): the open cylinder's ĉ at the nodes α_i, ``table[i, label, j]`` for ``modes[j]``.
+
+    ``label`` 0: û is Σ's major axis (u₁ along û); 1: v is (u₁ along v) — the principal-axes order that
+    ``coherence.degree_of_coherence`` uses, which flips where Σ_uu = Σ_vv. ``modes`` are those of
+    ``transverse_modes(mode_count)`` with n and m both even: Re f̃ is even in each axis (the region is
+    symmetric about û, and f̃(−ζ) = f̃(ζ)*), so the others vanish (to 1e-16). Each row is the constrained
+    expansion (``_constrain``) of exact-integration projections, as :func:`open_cylinder_coefficients`.
+    """
+    if isinstance(mode_count, bool) or not isinstance(mode_count, int) or not 1 <= mode_count <= MAX_MODES:
+        raise InputError(f"mode_count: must be an integer in 1..{MAX_MODES}, got {mode_count!r}")
+    degrees = transverse_modes(mode_count)
+    projections = _open_cylinder_projections(samples)[:, : len(degrees)]
+    swapped_columns = [transverse_modes(MAX_MODES).index((m, n)) for n, m in degrees]
+    swapped = _open_cylinder_projections(samples)[:, swapped_columns]
+    kept = [j for j, (n, m) in enumerate(degrees) if n % 2 == 0 and m % 2 == 0]
+    table = np.empty((samples, 2, len(kept)))
+    for i in range(samples):
+        for label, rows in enumerate((projections, swapped)):
+            constrained = _constrain(degrees, rows[i])
+            table[i, label] = [constrained[j][2] for j in kept]
+    return tuple(degrees[j] for j in kept), table

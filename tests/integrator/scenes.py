@@ -29,5 +29,31 @@ def plane_under_source(
     )
 
 
+def coated_plane(
+    name: str,
+    *,
+    view: Any,
+    film: dict[str, Any],
+    coating: dict[str, Any],
+    emitter: dict[str, Any],
+    fov_deg: float,
+) -> dict[str, Any]:
+    """A smooth plane z = 0 (normal +z) under a thin film (``coating``: the ``thin_film`` fields besides its
+    type and roughness), seen from the unit direction ``view`` 1 m away, lit by ``emitter`` only. The
+    roughness (1e-6 µm) makes its reflection a mirror's: a camera path goes on along the mirror direction."""
+    return build.scene(
+        name,
+        camera=build.camera(list(view), [0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0], fov_deg=fov_deg),
+        film=film,
+        materials={"coated": {"type": "thin_film", "roughness_rms_um": 1e-6, **coating}},
+        shapes=[
+            build.rectangle(
+                [0.0, 0.0, 0.0], normal=[0.0, 0.0, 1.0], up=[0.0, 1.0, 0.0], width_m=2.0, material="coated"
+            )
+        ],
+        emitters=[emitter],
+    )
+
+
 D65_SPHERE_SOURCE: dict[str, Any] = build.sphere([0.0, 0.3, 1.0], 0.2, spectrum={"type": "d65"}, power_w=50.0)
 """A bright white sphere source for ``plane_under_source`` (tiles and noise-target tests)."""

@@ -35,6 +35,7 @@ from hgcore.optics.thin_film import (
     transmission_terms,
 )
 from schemas import build
+from tests.integrator.scenes import coated_plane
 from worker.render.api import render_scene
 
 THICKNESS_M = 1.0e-6
@@ -55,30 +56,20 @@ SHEAR_TRANSVERSE_M = (
 def scene(sphere_radius_m: float) -> dict:
     view = (math.sin(math.radians(ANGLE_DEG)), 0.0, math.cos(math.radians(ANGLE_DEG)))
     centre = (-DISTANCE_M * SIN_T, 0.0, -DISTANCE_M * COS_T)
-    return build.scene(
+    return coated_plane(
         "transmission through a coated surface",
-        camera=build.camera(view, [0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0], fov_deg=0.1),
+        view=view,
         film=build.film(2, bands=16, spp=1024, max_depth=3),
-        materials={
-            "coated": {
-                "type": "thin_film",
-                "film_thickness_um": THICKNESS_M * 1e6,
-                "film_ior": FILM_IOR,
-                "substrate": {"ior": SUBSTRATE_IOR},
-                "roughness_rms_um": 1e-6,
-                "beams": BEAMS,
-            }
+        coating={
+            "film_thickness_um": THICKNESS_M * 1e6,
+            "film_ior": FILM_IOR,
+            "substrate": {"ior": SUBSTRATE_IOR},
+            "beams": BEAMS,
         },
-        shapes=[
-            build.rectangle(
-                [0.0, 0.0, 0.0], normal=[0.0, 0.0, 1.0], up=[0.0, 1.0, 0.0], width_m=2.0, material="coated"
-            )
-        ],
-        emitters=[
-            build.sphere(
-                centre, sphere_radius_m, spectrum={"type": "constant", "value": 1.0}, radiance_scale=1.0
-            )
-        ],
+        emitter=build.sphere(
+            centre, sphere_radius_m, spectrum={"type": "constant", "value": 1.0}, radiance_scale=1.0
+        ),
+        fov_deg=0.1,
     )
 
 

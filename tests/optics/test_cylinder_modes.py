@@ -20,7 +20,10 @@ from hgcore.optics.frames import transverse_frame
 from hgcore.optics.sources import (
     cylinder_silhouette_moments,
     open_cylinder_angular_coherence,
+    open_cylinder_coefficient_table,
     open_cylinder_coefficients,
+    open_cylinder_obliquity,
+    open_cylinder_table_obliquities,
     source_coefficients,
 )
 from tests.optics.test_sources import MC_SIGMAS, silhouette_samples, unit
@@ -126,3 +129,25 @@ def test_end_on_cylinder_radiates_nothing_to_the_receiver() -> None:
     with pytest.raises(InputError, match=r"^sin_theta"):
         open_cylinder_angular_coherence(RADIUS_M, LENGTH_M, 0.0, 1.0, 1.0)
     assert open_cylinder_angular_coherence(RADIUS_M, LENGTH_M, 0.5, 0.0, 0.0) == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("node", [0, 9, 24, 40, 63])
+@pytest.mark.parametrize("radius_over_length", [2.0 / 15.0, 0.5])
+def test_mode_table_nodes_are_the_exact_modes_of_any_cylinder_at_that_obliquity(
+    node: int, radius_over_length: float
+) -> None:
+    """The whitened region depends on α = atan2(R cosθ, L sinθ) alone: the table's node (built from one
+    representative cylinder) equals the exact integration for another R/L at the θ with that α, in the
+    label of its major axis (a long tube: û major off end-on; a short one: v major)."""
+    modes, table = open_cylinder_coefficient_table(9)
+    alpha = float(open_cylinder_table_obliquities()[node])
+    theta = math.atan2(radius_over_length, math.tan(alpha))  # tan α = (R/L) cot θ
+    sin_theta, cos_theta = math.sin(theta), math.cos(theta)
+    assert open_cylinder_obliquity(RADIUS_M, RADIUS_M / radius_over_length, sin_theta, cos_theta) == (
+        pytest.approx(alpha, abs=1e-12)
+    )
+    length_m = RADIUS_M / radius_over_length
+    exact = open_cylinder_coefficients(RADIUS_M, length_m, sin_theta, 9)
+    sigma_uu, sigma_vv = cylinder_silhouette_moments(RADIUS_M, length_m, sin_theta, cos_theta)
+    row = table[node, 0 if sigma_uu >= sigma_vv else 1]
+    assert np.max(np.abs(row - [exact[mode] for mode in modes])) < 1e-9

@@ -93,6 +93,83 @@ def emitter_is_rect(mi: Any, table: Any, emitter_index: Any) -> Any:
     return (kind == int(EmitterKind.RECTANGLE)) | (kind == int(EmitterKind.CYLINDER))
 
 
+@dataclass(frozen=True)
+class CylinderModes:
+    """The open cylinder's HG coefficients in the kernels: they depend on the view (``hgcore.optics.sources``,
+    "Oblique open cylinders"), through the one parameter α = atan2(R cosθ, L sinθ) of the whitened region.
+
+    ``values``: ``sources.open_cylinder_coefficient_table`` flattened as [node][label][mode] (float32), one
+    table for every cylinder of the scene; ``modes`` its (n, m); ``rect_coefficients`` the uniform
+    rectangle's, for the other emitters that expand like rectangles. Per lane the coefficients are
+    interpolated linearly in α between the two nearest nodes (|Δĉ_nm| ≤ OPEN_CYLINDER_TABLE_MAX_ABS_ERROR
+    = 9.3e-4, Σ|Δĉ| ≤ 3.1e-3, hence |Δμ| ≤ 1.8e-3: measured by ``bench/bench_cylinder_modes.py``), in the
+    label of Σ's major axis (û where Σ_uu ≥ Σ_vv, else v; ``degree_of_coherence`` orders its whitened axes
+    the same way). Built only for scenes with a cylinder and more than one mode (one mode: ĉ₀₀ = √π for all).
+    """
+
+    values: Any
+    modes: tuple[tuple[int, int], ...]
+    samples: int
+    rect_coefficients: dict[tuple[int, int], float]
+
+    @classmethod
+    def for_scene(cls, mi: Any, kinds: set[EmitterKind], mode_count: int) -> CylinderModes | None:
+        if EmitterKind.CYLINDER not in kinds or mode_count == 1:
+            return None
+        modes, table = sources.open_cylinder_coefficient_table(mode_count)
+        values = mi.Float(np.ascontiguousarray(table, dtype=np.float32).ravel())
+        return cls(values, modes, table.shape[0], sources.source_coefficients("rect", mode_count))
+
+    def coefficients(
+        self, mi: Any, table: Any, emitter_index: Any, frame_x: Any, frame_y: Any
+    ) -> dict[tuple[int, int], Any]:
+        """ĉ_nm per lane for emitter ``emitter_index`` seen along the direction ⟂ to the frame (the frame of
+        its Σ⊥ in ``emitter_coherence``): the cylinder's by its obliquity, the rectangle's for other kinds."""
+        import drjit as dr
+
+        from worker.render.drjit_ops import drjit_ops
+
+        base = emitter_index * STRIDE
+
+        def read(offset: int):
+            return dr.gather(mi.Float, table, base + offset)
+
+        radius, length = read(RADIUS), read(LENGTH)
+        axis = mi.Vector3f(read(AXIS), read(AXIS + 1), read(AXIS + 2))
+        axis_x, axis_y = dr.dot(axis, frame_x), dr.dot(axis, frame_y)
+        sin_theta2 = axis_x * axis_x + axis_y * axis_y
+        sin_theta = dr.sqrt(dr.minimum(sin_theta2, 1.0))
+        cos_theta = dr.sqrt(dr.maximum(1.0 - sin_theta2, 0.0))
+        sigma_uu, sigma_vv = sources.cylinder_silhouette_moments(radius, length, sin_theta, cos_theta)
+        cylinder = mi.UInt32(read(KIND)) == int(EmitterKind.CYLINDER)
+        alpha = sources.open_cylinder_obliquity(radius, length, sin_theta, cos_theta, drjit_ops())
+        # Other kinds store R = L = 0 (atan2(0, 0)): any node would do, but keep the index finite.
+        alpha = dr.select(cylinder & dr.isfinite(alpha), alpha, 0.0)
+        position = alpha * ((self.samples - 1) / (0.5 * dr.pi))
+        node = mi.UInt32(dr.clip(dr.floor(position), 0.0, self.samples - 2.0))
+        weight = position - mi.Float(node)
+        label = dr.select(sigma_uu >= sigma_vv, mi.UInt32(0), mi.UInt32(1))
+        width = len(self.modes)
+        low_row = (node * 2 + label) * width
+        high_row = low_row + 2 * width
+        result = {}
+        for column, mode in enumerate(self.modes):
+            low = dr.gather(mi.Float, self.values, low_row + column)
+            high = dr.gather(mi.Float, self.values, high_row + column)
+            result[mode] = dr.select(cylinder, dr.fma(weight, high - low, low), self.rect_coefficients[mode])
+        return result
+
+
+def emitter_rect_modes(
+    mi: Any, table: Any, cylinder_modes: CylinderModes | None, emitter_index: Any, frame_x: Any, frame_y: Any
+) -> dict[tuple[int, int], Any] | None:
+    """Per-lane ĉ of the emitters that expand like rectangles (``CylinderModes.coefficients``), or None —
+    the universal rectangle's — where the scene has no cylinder table (nothing is traced then)."""
+    if cylinder_modes is None:
+        return None
+    return cylinder_modes.coefficients(mi, table, emitter_index, frame_x, frame_y)
+
+
 def sphere_solid_angle(mi: Any, table: Any, emitter_index: Any, distance_m: Any) -> tuple[Any, Any]:
     """(whether the emitter is a sphere seen from outside, the solid angle Ω (sr) it subtends from a
     receiver ``distance_m`` from its centre).

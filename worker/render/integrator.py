@@ -61,9 +61,11 @@ from worker.render.bsdfs import (
 from worker.render.bsdfs.lobes import mean_over_wavelengths
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import (
+    CylinderModes,
     emitter_coherence,
     emitter_direction,
     emitter_is_rect,
+    emitter_rect_modes,
     sphere_solid_angle,
 )
 
@@ -97,7 +99,7 @@ class RenderContext:
     emitter_index: mi.UInt32  # emitter registry id -> emitter record
     emitter_kinds: set
     # (n, m) -> ĉ of the universal expansions (Eq. 14) used for visibilities: uniform disks (spheres, disks,
-    # scattering regions) and uniform rectangles (rectangles, cylinders seen side-on).
+    # scattering regions) and uniform rectangles (rectangles; cylinders: ``cylinder_modes`` where it is set).
     disk_coefficients: dict[tuple[int, int], float]
     rect_coefficients: dict[tuple[int, int], float]
     black_material: int  # index of the absorbing material (emitters, misses)
@@ -105,6 +107,8 @@ class RenderContext:
     camera_position: mi.Point3f  # world-space centre of projection
     camera_right: mi.Vector3f  # world-space unit vectors of the image's +x and +y (up) directions
     camera_up: mi.Vector3f
+    # The open cylinders' view-dependent modes (None: no cylinder, or one mode).
+    cylinder_modes: CylinderModes | None = None
 
 
 @dataclass
@@ -300,6 +304,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         self.kernels = MaterialKernels(params)
 
     # ------------------------------------------------------------------ coherence helpers
+    def _rect_modes(self, em_record: mi.UInt32, frame_x: mi.Vector3f, frame_y: mi.Vector3f):
+        """Per-lane ĉ of rectangle-like emitters seen in this frame (``emitters.emitter_rect_modes``)."""
+        table, modes = self.context.emitter_flat, self.context.cylinder_modes
+        return emitter_rect_modes(mi, table, modes, em_record, frame_x, frame_y)
+
     def _frame_for(self, direction: mi.Vector3f) -> tuple[mi.Vector3f, mi.Vector3f]:
         x_axis, y_axis = transverse_frame_components(
             (direction.x, direction.y, direction.z), tuple(self.context.camera_right), OPS
@@ -440,6 +449,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             record.frame_x,
             record.frame_y,
             vertex.hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
+            self._rect_modes(em_record, record.frame_x, record.frame_y),
         )
         if self.kernels.has(mat.INTERFERENCE_KINDS):
             # An emitter reached straight from the film: its interference phase is taken towards the
@@ -557,7 +567,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             )
             angle_terms = self._screen_angle_terms(*sigma, frame_x, frame_y)
         is_rect = emitter_is_rect(mi, self.context.emitter_flat, em_record)
-        coherence = IncidentCoherence(*sigma, distance_m, frame_x, frame_y, is_rect)
+        rect_modes = self._rect_modes(em_record, frame_x, frame_y)
+        coherence = IncidentCoherence(*sigma, distance_m, frame_x, frame_y, is_rect, rect_modes)
         return coherence, self._coherence_sample(sigma, distance_m, angle_terms)
 
     # ------------------------------------------------------------------ Mitsuba interface

@@ -22,7 +22,7 @@ import numpy as np
 from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums
 from hgcore.optics.sources import source_coefficients
 from worker.mitsuba_setup import load_mitsuba
-from worker.render.emitters import EmitterKind
+from worker.render.emitters import CylinderModes, EmitterKind
 from worker.render.integrator import RenderContext, register
 from worker.render.rlt import integrator_class
 from worker.render.scene_compiler import CompiledScene
@@ -112,6 +112,7 @@ class Renderer:
             disk_coefficients=source_coefficients("disk", compiled.scene.film.modes),
             rect_coefficients=source_coefficients("rect", compiled.scene.film.modes),
             rect_sources=bool(kinds & {EmitterKind.RECTANGLE, EmitterKind.CYLINDER}),
+            cylinder_modes=CylinderModes.for_scene(mi, kinds, compiled.scene.film.modes),
             camera_right=camera_right,
             camera_up=camera_up,
             camera_position=camera_position,

@@ -47,6 +47,9 @@ class IncidentCoherence:
     frame_x: mi.Vector3f  # world-space unit vectors spanning the transverse plane
     frame_y: mi.Vector3f
     rect_source: mi.Bool | bool = False  # True where the source expands like a uniform rectangle (Eq. 14)
+    # Per-lane ĉ_nm where rect_source (cylinders: by their view, ``emitters.CylinderModes``); None: the
+    # universal rectangle's.
+    rect_modes: dict[tuple[int, int], mi.Float] | None = None
 
 
 @dataclass(frozen=True)
@@ -54,8 +57,9 @@ class VisibilityModel:
     """μ(ξ) of the light a vertex receives (Def. 4.1 / Eq. 18), from the universal expansions of Eq. 14.
 
     ``disk_coefficients`` / ``rect_coefficients``: (n, m) → ĉ of uniform disks (spheres, disks, scattering
-    regions) and uniform rectangles (rectangles, cylinders seen side-on); ``rect_sources``: whether any
-    emitter of the scene expands like a rectangle (else the rectangle's branch is not compiled).
+    regions) and uniform rectangles (rectangles; cylinders use ``IncidentCoherence.rect_modes``, their own
+    view-dependent modes, where the scene has them); ``rect_sources``: whether any emitter of the scene
+    expands like a rectangle (else the rectangle's branch is not compiled).
     """
 
     disk_coefficients: dict[tuple[int, int], float]
@@ -72,11 +76,12 @@ class VisibilityModel:
         distance = dr.maximum(coherence.distance_m, 1e-9)
         # With one mode both expansions are the same Gaussian: evaluate the rectangle's only when it differs.
         needs_rect = self.rect_coefficients != self.disk_coefficients and self.rect_sources
+        rect_coefficients = self.rect_coefficients if coherence.rect_modes is None else coherence.rect_modes
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
             mu = degree_of_coherence(xi, sigma, distance, wavelength_m, self.disk_coefficients, OPS)
             if needs_rect:
-                mu_rect = degree_of_coherence(xi, sigma, distance, wavelength_m, self.rect_coefficients, OPS)
+                mu_rect = degree_of_coherence(xi, sigma, distance, wavelength_m, rect_coefficients, OPS)
                 mu = dr.select(coherence.rect_source, mu_rect, mu)
             result[j] = mu
         return result
