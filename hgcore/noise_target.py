@@ -22,6 +22,7 @@ budget makes the number of rounds depend on the machine's speed, by nature).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -89,34 +90,69 @@ class NoiseTarget:
         return "band_mean" if self.quantile is None else "luminance_quantile"
 
 
-def band_rel_errors(sums: PixelSums) -> np.ndarray:
-    """e_b, the relative standard error of each band's image mean (0 for a band without light)."""
-    count = float(sums.sample_count)
-    mean = sums.bands / count
-    variance_of_mean = np.maximum(sums.bands_sq / count - mean**2, 0.0) / count
-    pixels = mean.shape[0] * mean.shape[1]
-    image_mean = mean.sum(axis=(0, 1)) / pixels
-    image_std = np.sqrt(variance_of_mean.sum(axis=(0, 1))) / pixels
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(image_mean > 0, image_std / image_mean, 0.0)
+class ImageErrors:
+    """The two error measures (module docstring) accumulated over an image's row bands, so that a render
+    never needs its whole image's sums at once: per band Σ_p x̄_pb and Σ_p s²_pb/N over the pixels, and
+    the luminance relative error e_p of every lit pixel (8 bytes a pixel)."""
 
+    def __init__(self) -> None:
+        self.sample_count = 0
+        self.pixels = 0
+        self.band_mean_sum: np.ndarray | None = None
+        self.band_variance_sum: np.ndarray | None = None
+        self._luminance_errors: list[np.ndarray] = []
 
-def luminance_rel_error(sums: PixelSums, quantile: float) -> float:
-    """The ``quantile`` of the per-pixel luminance relative standard error over lit pixels (0 if none)."""
-    count = float(sums.sample_count)
-    mean = sums.values["luminance"] / count
-    variance_of_mean = np.maximum(sums.values["luminance_sq"] / count - mean**2, 0.0) / count
-    lit = mean > 0
-    if not lit.any():
-        return 0.0
-    return float(np.quantile(np.sqrt(variance_of_mean[lit]) / mean[lit], quantile))
+    @classmethod
+    def of(cls, sums: Iterable[PixelSums]) -> ImageErrors:
+        """The errors of an image given as row bands (or one whole-image ``PixelSums`` in a list)."""
+        errors = cls()
+        for part in sums:
+            errors.add(part)
+        return errors
 
+    def add(self, sums: PixelSums) -> None:
+        """Count one row band's pixels (every band has the same ``sample_count``)."""
+        count = float(sums.sample_count)
+        self.sample_count = sums.sample_count
+        # Band by band: the temporaries are one band of the rows, not all of them (a tile of 32 bands
+        # would need ~0.25 GB of them at once).
+        band_count = sums.bands.shape[-1]
+        band_mean, band_variance = np.zeros(band_count), np.zeros(band_count)
+        for band in range(band_count):
+            mean = sums.bands[..., band] / count
+            band_mean[band] = mean.sum()
+            band_variance[band] = (np.maximum(sums.bands_sq[..., band] / count - mean**2, 0.0) / count).sum()
+        if self.band_mean_sum is None or self.band_variance_sum is None:
+            self.band_mean_sum, self.band_variance_sum = band_mean, band_variance
+        else:
+            self.band_mean_sum, self.band_variance_sum = (
+                self.band_mean_sum + band_mean,
+                self.band_variance_sum + band_variance,
+            )
+        self.pixels += sums.bands.shape[0] * sums.bands.shape[1]
+        luminance = sums.values["luminance"] / count
+        luminance_variance = np.maximum(sums.values["luminance_sq"] / count - luminance**2, 0.0) / count
+        lit = luminance > 0
+        self._luminance_errors.append(np.sqrt(luminance_variance[lit]) / luminance[lit])
 
-def achieved_error(target: NoiseTarget, sums: PixelSums) -> float:
-    """The render's error in ``target``'s measure (module docstring)."""
-    if target.quantile is not None:
-        return luminance_rel_error(sums, target.quantile)
-    return float(band_rel_errors(sums).max(initial=0.0))
+    def band_rel_errors(self) -> np.ndarray:
+        """e_b, the relative standard error of each band's image mean (0 for a band without light)."""
+        assert self.band_mean_sum is not None and self.band_variance_sum is not None
+        image_mean = self.band_mean_sum / self.pixels
+        image_std = np.sqrt(self.band_variance_sum) / self.pixels
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(image_mean > 0, image_std / image_mean, 0.0)
+
+    def luminance_rel_error(self, quantile: float) -> float:
+        """The ``quantile`` of the per-pixel luminance relative error over lit pixels (0 if none)."""
+        errors = np.concatenate(self._luminance_errors) if self._luminance_errors else np.zeros(0)
+        return float(np.quantile(errors, quantile)) if errors.size else 0.0
+
+    def achieved(self, target: NoiseTarget) -> float:
+        """The render's error in ``target``'s measure."""
+        if target.quantile is not None:
+            return self.luminance_rel_error(target.quantile)
+        return float(self.band_rel_errors().max(initial=0.0))
 
 
 def next_round_spp(
@@ -150,14 +186,14 @@ def stop_reason(target: NoiseTarget, error: float, spp_done: int, max_spp: int) 
 
 
 def summary_block(
-    target: NoiseTarget, sums: PixelSums, rounds: list[dict[str, Any]], reason: str | None
+    target: NoiseTarget, errors: ImageErrors, rounds: list[dict[str, Any]], reason: str | None
 ) -> dict[str, Any]:
     """The ``noise_target`` block of ``summary.json``: the request, the achieved error in its measure and
     per band, whether it was met, why the rounds stopped and each round's spp, seconds and error. While
     a job still renders, the same block of the rounds so far (``reason`` None) is its view's progress."""
-    band_errors = band_rel_errors(sums)  # once: the band-mean measure is its maximum (achieved_error)
+    band_errors = errors.band_rel_errors()  # once: the band-mean measure is its maximum
     if target.quantile is not None:
-        error = luminance_rel_error(sums, target.quantile)
+        error = errors.luminance_rel_error(target.quantile)
     else:
         error = float(band_errors.max(initial=0.0))
     return {
@@ -169,6 +205,6 @@ def summary_block(
         "band_rel_error": band_errors.tolist(),
         "met": target.rel_error is not None and error <= target.rel_error,
         "stop_reason": reason,
-        "spp": sums.sample_count,
+        "spp": errors.sample_count,
         "rounds": rounds,
     }

@@ -43,12 +43,13 @@ from hgcore.artifacts.keys import (
     scene_key,
     worker_log_key,
 )
-from hgcore.artifacts.pixel_sums import PixelSums, write_partial
+from hgcore.artifacts.pixel_sums import write_partial_rows
+from hgcore.artifacts.running_sums import RunningSums
 from hgcore.jobs.keys import job_key
 from hgcore.jobs.queue_graph import chunk_rq_id
 from hgcore.jobs.records import JobRecords
 from hgcore.jobs.status import TERMINAL_STATUSES, JobStatus
-from hgcore.noise_target import NoiseTarget
+from hgcore.noise_target import ImageErrors, NoiseTarget
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, validate_scene
@@ -268,8 +269,8 @@ class _RoundPreviews:
     (``jobs/<id>/chunks/0.npz``: a target job is one chunk; atomic, replaced round by round, so the
     viewer's merge of the chunk partials shows it), then record the block of the rounds so far in the
     job view (``JobRecords.noise_target_round``; the viewer refreshes when its round count changes).
-    The partial is streamed row band by row band (one tile's float32 table at a time) from the sums
-    the render holds anyway; the final artifacts are written from the same sums as before.
+    The partial is streamed row band by row band (one tile's float32 table at a time) from the running
+    sums the render keeps on disk anyway; the final artifacts are written from the same sums as before.
 
     Publishing costs time that grows with the image (at 1024² × 32 bands: a 368 MiB partial written and
     stored, and the per-band errors, ≈ 3–5 s on 2 cores), while a round near the target can be short
@@ -283,7 +284,7 @@ class _RoundPreviews:
         self.published_at_render_s: float | None = None  # render seconds at the last publication
         self.cost_s = 0.0  # what the last publication took (wall seconds)
 
-    def __call__(self, running: PixelSums, rounds: list[dict[str, Any]]) -> None:
+    def __call__(self, running: RunningSums, errors: ImageErrors, rounds: list[dict[str, Any]]) -> None:
         render_s = rounds[-1]["seconds"]
         if (
             self.published_at_render_s is not None
@@ -291,17 +292,27 @@ class _RoundPreviews:
         ):
             return
         started = time.perf_counter()
-        self._publish(running, rounds)
+        self._publish(running, errors, rounds)
         self.published_at_render_s, self.cost_s = render_s, time.perf_counter() - started
 
-    def _publish(self, running: PixelSums, rounds: list[dict[str, Any]]) -> None:
-        from worker.render.renderer import tile_rows
+    def _publish(self, running: RunningSums, errors: ImageErrors, rounds: list[dict[str, Any]]) -> None:
+        from worker.render.renderer import tile_bands
 
-        height, width, _ = running.bands.shape
-        rows = tile_rows(width, height)
-        write_partial(self.path, running, rounds[-1]["seconds"], 0, self.seed, rows_per_write=rows)
+        width, height = running.width, running.height
+        row_bands = running.row_bands(tile_bands(width, height))
+        write_partial_rows(
+            self.path,
+            width,
+            height,
+            running.band_count,
+            row_bands,
+            running.sample_count,
+            rounds[-1]["seconds"],
+            0,
+            self.seed,
+        )
         self.jobs.store.put_file(chunk_key(self.job_id, 0), self.path)
-        block = noise_target.summary_block(self.target, running, rounds, None)
+        block = noise_target.summary_block(self.target, errors, rounds, None)
         self.jobs.noise_target_round(self.job_id, block)
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import contextlib
 import struct
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -112,8 +112,9 @@ class PixelSums:
 
     @classmethod
     def from_table(cls, sample_count: int, band_count: int, table: np.ndarray) -> PixelSums:
-        """Sums (float64) from a (rows, W, C) table in the partial's column order."""
-        table = table.astype(np.float64)
+        """Sums (float64) from a (rows, W, C) table in the partial's column order (views of a float64
+        table, not copies)."""
+        table = table.astype(np.float64, copy=False)
         return cls(
             sample_count,
             table[..., :band_count],
@@ -251,10 +252,28 @@ def write_partial(
     ``rows_per_write`` rows at a time (default: all), so that only that band's float32 table exists."""
     height, width, band_count = sums.bands.shape
     step = height if rows_per_write is None else max(1, rows_per_write)
+    row_bands = (sums.row_slice(y0, y0 + step) for y0 in range(0, height, step))
+    write_partial_rows(
+        path, width, height, band_count, row_bands, sums.sample_count, seconds, chunk_index, seed
+    )
+
+
+def write_partial_rows(
+    path: Path,
+    width: int,
+    height: int,
+    band_count: int,
+    row_bands: Iterable[PixelSums],
+    sample_count: int,
+    seconds: float,
+    chunk_index: int,
+    seed: int,
+) -> None:
+    """Write a chunk partial from its row bands (top to bottom, covering the image) to ``path`` (atomic)."""
     with partial_writer(path, width, height, band_count) as writer:
-        for y0 in range(0, height, step):
-            writer.write_rows(sums.row_slice(y0, y0 + step))
-        writer.finish(sums.sample_count, seconds, chunk_index, seed)
+        for rows in row_bands:
+            writer.write_rows(rows)
+        writer.finish(sample_count, seconds, chunk_index, seed)
 
 
 def read_partial(path: Path) -> tuple[PixelSums, float]:

@@ -20,6 +20,8 @@ from hgcore.artifacts.pixel_sums import (
     read_partial,
     write_partial,
 )
+from hgcore.artifacts.running_sums import RunningSums
+from hgcore.noise_target import ImageErrors
 from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
 from worker.render.api import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
 from worker.render.renderer import tile_rows
@@ -102,12 +104,7 @@ def test_tiles_render_distinct_samples_with_the_same_expectation(
 def test_partials_stream_by_rows_and_round_like_in_memory_chunks(tmp_path: Path) -> None:
     rng = np.random.default_rng(1)
     shape = (7, 5)
-    sums = PixelSums(
-        3,
-        rng.random((*shape, 4)) * 1e3,
-        rng.random((*shape, 4)) * 1e6,
-        {key: rng.random(shape) for key in SUM_KEYS},
-    )
+    sums = random_sums(rng, 3, shape, 4)
     path = tmp_path / "p.npz"
     with partial_writer(path, 5, 7, 4) as writer:
         writer.write_rows(sums.row_slice(0, 4))
@@ -151,3 +148,54 @@ def test_an_unfinished_partial_or_exr_leaves_no_file(tmp_path: Path) -> None:
     ):
         exr.write_rows(0, [np.zeros((2, 3))])  # the block ends with rows 2-3 missing
     assert list(tmp_path.iterdir()) == []
+
+
+def random_sums(rng: np.random.Generator, sample_count: int, shape: tuple[int, int], bands: int) -> PixelSums:
+    return PixelSums(
+        sample_count,
+        rng.random((*shape, bands)) * 1e3,
+        rng.random((*shape, bands)) * 1e6,
+        {key: rng.random(shape) for key in SUM_KEYS},
+    )
+
+
+def test_running_sums_on_disk_add_chunks_bitwise_as_whole_images_do() -> None:
+    """Three chunks added row band by row band into ``RunningSums`` equal ``PixelSums.add`` of the whole
+    images to the bit (same float64 additions, same order), and the file keeps every column apart."""
+    rng = np.random.default_rng(7)
+    chunks = [random_sums(rng, spp, (7, 5), 4) for spp in (2, 3, 5)]
+    bands = [(0, 3), (3, 6), (6, 7)]
+    with RunningSums(5, 7, 4) as running:
+        for chunk in chunks:
+            returned = [running.add_rows(y0, chunk.row_slice(y0, y1)) for y0, y1 in bands]
+            running.finish_chunk(chunk.sample_count)
+        expected = chunks[0].add(chunks[1]).add(chunks[2])
+        assert running.sample_count == expected.sample_count == 10
+        stored = PixelSums.concatenate(list(running.row_bands(bands)))
+        assert np.array_equal(stored.table(), expected.table())  # float32 view of the whole table
+        assert np.array_equal(stored.bands, expected.bands) and np.array_equal(
+            stored.bands_sq, expected.bands_sq
+        )
+        assert all(np.array_equal(stored.values[k], expected.values[k]) for k in SUM_KEYS)
+        assert np.array_equal(PixelSums.concatenate(returned).bands, expected.bands)  # what add_rows returned
+        assert np.array_equal(running.whole().values["luminance"], expected.values["luminance"])
+        with pytest.raises(ValueError, match="not stored"):
+            running.rows(6, 9)
+
+
+def test_image_errors_from_row_bands_equal_those_of_the_whole_image() -> None:
+    """The noise-target errors accumulated band by band (what a streamed render measures) are those of
+    the whole image: the luminance quantile exactly, the band-mean errors to float64 rounding."""
+    rng = np.random.default_rng(8)
+    whole = random_sums(rng, 4, (9, 6), 3)
+    whole.values["luminance"][0, :2] = 0.0  # unlit pixels are left out of the quantile
+    by_bands = ImageErrors.of(whole.row_slice(y0, min(y0 + 4, 9)) for y0 in range(0, 9, 4))
+    at_once = ImageErrors.of([whole])
+    np.testing.assert_allclose(by_bands.band_rel_errors(), at_once.band_rel_errors(), rtol=1e-14)
+    assert by_bands.luminance_rel_error(0.9) == at_once.luminance_rel_error(0.9)
+    # and both are the closed form of the module docstring, written out here independently
+    mean = whole.bands / 4
+    variance = np.maximum(whole.bands_sq / 4 - mean**2, 0) / 4
+    expected = np.sqrt(variance.sum(axis=(0, 1))) / mean.sum(axis=(0, 1))
+    np.testing.assert_allclose(at_once.band_rel_errors(), expected, rtol=1e-14)
+    assert by_bands.pixels == 54 and by_bands.sample_count == 4

@@ -8,9 +8,10 @@ its ``.npz`` partial stores) and the chunks' sums are added in float64 in chunk 
 local render (``render_scene``), a service job of one chunk and the merge of K uploaded partials
 (``merge_chunks``) write bitwise-identical images for the same plan; the unsplit render is the K = 1
 plan. Nothing holds more than one tile of per-pixel sums: image.exr and variance.exr are written band by
-band (``hgcore.artifacts.images.image_set_writer``), partials are streamed in and out by rows. Two
-exceptions keep the whole image's sums in memory: a render with ``on_chunk`` previews (tev) and a
-noise-target render (``hgcore.noise_target``: its error is a statistic over all pixels).
+band (``hgcore.artifacts.images.image_set_writer``), partials are streamed in and out by rows. A
+noise-target render, whose error is a statistic over all pixels (``hgcore.noise_target``), keeps its
+running sums between rounds on disk (``hgcore.artifacts.running_sums``) and measures the error row band
+by row band; only a render with ``on_chunk`` previews (tev) reads the whole image's sums back at once.
 """
 
 from __future__ import annotations
@@ -25,17 +26,19 @@ from hgcore import noise_target
 from hgcore.artifacts.images import IMAGE_FILES, image_set_writer, write_summary
 from hgcore.artifacts.layout import SUMMARY_JSON, BandLayout
 from hgcore.artifacts.pixel_sums import PartialReader, PixelSums, iter_merged_rows, partial_writer
+from hgcore.artifacts.running_sums import RunningSums
 from hgcore.errors import InputError
-from hgcore.noise_target import NoiseTarget
+from hgcore.noise_target import ImageErrors, NoiseTarget
 from schemas.scene import ABSOLUTE_MAX_SPP, Scene
 from schemas.validation import validate_scene
 from worker.render.renderer import Renderer, tile_bands
 from worker.render.scene_compiler import SceneCompiler
 
 ProgressCallback = Callable[[float], None]
-RoundCallback = Callable[[PixelSums, list[dict[str, Any]]], None]
-"""``on_round(running, rounds)`` of a noise-target render: the rounded sums of the rounds so far and each
-round's ``{"spp", "seconds", "rel_error"}`` (``hgcore.noise_target.summary_block``'s ``rounds``)."""
+RoundCallback = Callable[[RunningSums, ImageErrors, list[dict[str, Any]]], None]
+"""``on_round(running, errors, rounds)`` of a noise-target render: the running sums of the rounds so far
+(read them a row band at a time), their errors and each round's ``{"spp", "seconds", "rel_error"}``
+(``hgcore.noise_target.summary_block``'s ``rounds``)."""
 
 
 @dataclass(frozen=True)
@@ -257,12 +260,13 @@ def render_to_dir(
 ) -> dict[str, Any]:
     """Render ``plan``'s chunks in this process and write the final artifacts to ``out_dir``.
 
-    Streams tile by tile unless ``on_chunk(sums)`` wants the running sum of the chunks finished so far
-    after each one (previews) or a noise ``target`` adds chunks (rounds) until it is met; those two hold
-    the whole image's sums, in chunk-major order, which gives the same bits (the same rounded chunk tile
-    sums added in the same order). With a ``target``, ``on_round(running, rounds)`` is called after each
-    round that another round follows (a running job's preview; the last round's sums become the final
-    artifacts instead); it only reads the sums, so the result is the same with or without it."""
+    Streams tile by tile (every chunk of a tile, then the next tile) unless ``on_chunk(sums)`` wants the
+    running sum of the chunks finished so far after each one (previews) or a noise ``target`` adds chunks
+    (rounds) until it is met. Those two render chunk by chunk into ``RunningSums`` on disk, one tile in
+    memory, which gives the same bits (the same rounded chunk tile sums added in the same order). With a
+    ``target``, ``on_round(running, errors, rounds)`` is called after each round that another round
+    follows (a running job's preview; the last round's sums become the final artifacts instead); it only
+    reads the sums, so the result is the same with or without it."""
     load_started = time.perf_counter()
     renderer = renderer_for(scene, bundle_dir)
     load_seconds = time.perf_counter() - load_started  # counted as render time, as a chunk's is
@@ -278,24 +282,46 @@ def render_to_dir(
             render_seconds=lambda: timer.seconds,
             extra_summary=extra_summary,
         )
-    started = time.perf_counter()
     tracker = _Progress(progress, sum(c.spp for c in plan))
-    running: PixelSums | None = None
-    rounds: list[dict[str, Any]] = []
     chunks = list(plan)
+    rounds: list[dict[str, Any]] = []
     render_seconds = load_seconds
-    index = 0
-    while index < len(chunks):
-        chunk = chunks[index]
-        chunk_started = time.perf_counter()
-        sums = renderer.render_sums(chunk.spp, chunk.seed, tracker.part(chunk.spp), should_stop).rounded()
-        render_seconds += time.perf_counter() - chunk_started
-        running = sums if running is None else running.add(sums)
-        if on_chunk is not None:
-            on_chunk(running)
-        index += 1
-        if target is not None and index == len(chunks):
-            error = noise_target.achieved_error(target, running)
+    started = time.perf_counter()
+    band_count = scene.film.bands
+    tiles = renderer.tiles()
+    with RunningSums(renderer.width, renderer.height, band_count) as running:
+        index = 0
+        while index < len(chunks):
+            chunk = chunks[index]
+            # ---- add the chunk to the running sums, tile by tile; measure the error at a round's end
+            round_ends = target is not None and index == len(chunks) - 1
+            errors = ImageErrors()
+            report = tracker.part(chunk.spp)
+            for tile_index, (y0, _) in enumerate(tiles):
+
+                def tile_progress(
+                    fraction: float, tile_index: int = tile_index, report: ProgressCallback = report
+                ) -> None:
+                    report((tile_index + fraction) / len(tiles))
+
+                tile_started = time.perf_counter()  # render time: the tile, not the bookkeeping after it
+                sums = renderer.render_tile_sums(
+                    tile_index, chunk.spp, chunk.seed, tile_progress, should_stop
+                ).rounded()
+                render_seconds += time.perf_counter() - tile_started
+                rows = running.add_rows(y0, sums)
+                if round_ends:
+                    errors.add(rows)
+                del sums, rows  # a tile's tables must not live on while the next tile renders
+            running.finish_chunk(chunk.spp)
+            if on_chunk is not None:
+                on_chunk(running.whole())
+            index += 1
+            if not round_ends:
+                continue
+            # ---- plan the next round, or stop
+            assert target is not None
+            error = errors.achieved(target)
             rounds.append({"spp": running.sample_count, "seconds": render_seconds, "rel_error": error})
             more = noise_target.next_round_spp(
                 target,
@@ -307,26 +333,24 @@ def render_to_dir(
             )
             if more > 0:
                 if on_round is not None:
-                    on_round(running, rounds)
+                    on_round(running, errors, rounds)
                 chunks.append(ChunkSpec(len(chunks), more, chunk_seed(scene.film.seed, len(chunks))))
                 # The total is now a prediction: progress runs over the samples planned so far.
                 tracker.total += more
-    assert running is not None
-    extra = dict(extra_summary or {})
-    if target is not None:
-        reason = noise_target.stop_reason(
-            target, rounds[-1]["rel_error"], running.sample_count, ABSOLUTE_MAX_SPP
+        extra = dict(extra_summary or {})
+        if target is not None:
+            reason = noise_target.stop_reason(
+                target, rounds[-1]["rel_error"], running.sample_count, ABSOLUTE_MAX_SPP
+            )
+            extra["noise_target"] = noise_target.summary_block(target, errors, rounds, reason)
+        return write_merged(
+            scene,
+            running.row_bands(tiles),
+            out_dir,
+            chunks=len(chunks),
+            render_seconds=lambda: render_seconds,
+            extra_summary=extra,
         )
-        extra["noise_target"] = noise_target.summary_block(target, running, rounds, reason)
-    row_bands = (running.row_slice(y0, y1) for y0, y1 in renderer.tiles())
-    return write_merged(
-        scene,
-        row_bands,
-        out_dir,
-        chunks=len(chunks),
-        render_seconds=lambda: render_seconds,
-        extra_summary=extra,
-    )
 
 
 def with_overrides(scene: Scene | dict[str, Any], **overrides: Any) -> Scene:
