@@ -229,6 +229,7 @@ def write_merged(
         "modes": film.modes,
         "max_depth": film.max_depth,
         "integrator": film.integrator,
+        "wavelength_sampling": film.wavelength_sampling,
         "chunks": chunks,
         "variant": load_mitsuba().variant(),
         "render_seconds": seconds,
