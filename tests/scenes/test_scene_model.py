@@ -183,6 +183,14 @@ def test_unknown_material_reference_and_extra_fields_are_located() -> None:
     assert [p["pointer"] for p in problems_of(data)] == ["/shapes/0/colour"]
 
 
+def test_wavelength_sampling_defaults_to_importance_and_is_validated() -> None:
+    assert validate_scene(minimal_scene()).film.wavelength_sampling == "importance"
+    uniform = minimal_scene() | {"film": {"wavelength_sampling": "uniform"}}
+    assert validate_scene(uniform).film.wavelength_sampling == "uniform"
+    problems = problems_of(minimal_scene() | {"film": {"wavelength_sampling": "hero"}})
+    assert [p["pointer"] for p in problems] == ["/film/wavelength_sampling"]
+
+
 def test_strings_are_not_coerced_to_numbers_and_nan_is_rejected() -> None:
     data = minimal_scene()
     data["shapes"][0]["radius_m"] = "1.0"
