@@ -283,7 +283,7 @@ class PerspectiveCamera(StrictModel):
 
 
 #: ``film.wavelength_sampling``: how a sample's wavelengths are drawn (docs/scenes.md, Film).
-WavelengthSampling = Literal["uniform", "importance"]
+WavelengthSampling = Literal["auto", "uniform", "importance"]
 
 
 class Film(StrictModel):
@@ -303,9 +303,10 @@ class Film(StrictModel):
     #: (a fully coherent plane wave per sample, no shape matrix; worker/render/rlt.py).
     integrator: Literal["hg_path", "rlt"] = "hg_path"
     #: How each sample's four wavelengths are drawn (worker/render/wavelength_sampling.py): ``importance``
-    #: (default) concentrates them where the emitters emit, by a defensive mixture with uniform sampling
-    #: (a fluorescent lamp's lines no longer speckle colours); ``uniform``: uniformly over the range.
-    wavelength_sampling: WavelengthSampling = "importance"
+    #: concentrates them where the emitters emit, by a defensive mixture with uniform sampling (a
+    #: fluorescent lamp's lines no longer speckle colours); ``uniform``: uniformly over the range; ``auto``
+    #: (default): ``importance`` when the emitters' spectra have lines, else ``uniform``.
+    wavelength_sampling: WavelengthSampling = "auto"
 
     @model_validator(mode="after")
     def _range(self) -> Film:

@@ -37,7 +37,9 @@ from worker.render.wavelength_sampling import (
     WavelengthSampler,
     importance_density,
     knot_pdf_nm,
+    line_spikiness,
     quantile_knots,
+    sampling_mode,
 )
 
 F11_SPHERE = build.sphere([0.0, 0.3, 1.0], 0.2, spectrum={"type": "cie_f", "name": "F11"}, power_w=50.0)
@@ -60,6 +62,34 @@ def test_density_keeps_its_floors() -> None:
     line = (np.arange(density.cells_per_band) + 0.5) * density.cell_nm + bands.edges_nm[band]
     in_line = (line >= 540.0) & (line <= 550.0)
     assert cells[band, in_line].sum() > 0.6 * masses[band]
+
+
+@pytest.mark.parametrize(
+    ("spectrum", "mode"),
+    [
+        ({"type": "cie_f", "name": "F11"}, "importance"),
+        ({"type": "cie_f", "name": "F7"}, "importance"),
+        ({"type": "cie_f", "name": "F2"}, "importance"),
+        ({"type": "d65"}, "uniform"),
+        ({"type": "blackbody", "temperature_k": 3000.0}, "uniform"),
+        ({"type": "constant", "value": 1.0}, "uniform"),
+    ],
+)
+def test_auto_samples_line_spectra_by_importance(spectrum: dict, mode: str) -> None:
+    source = build.sphere([0.0, 0.3, 1.0], 0.2, spectrum=spectrum, power_w=50.0)
+    scene = validate_scene(plane_under_source(source))
+    assert scene.film.wavelength_sampling == "auto"
+    assert sampling_mode(scene) == mode
+
+
+def test_line_spikiness_of_flat_and_single_line_spectra() -> None:
+    assert line_spikiness(np.ones_like, 380.0, 780.0) == pytest.approx(1.0, abs=1e-12)
+
+    # A box line 2 nm wide inside one 20 nm window: that window holds all power, ⟨Φ²⟩/⟨Φ⟩² = 20/2.
+    def line(wavelengths: np.ndarray) -> np.ndarray:
+        return ((wavelengths >= 549.0) & (wavelengths < 551.0)).astype(float)
+
+    assert line_spikiness(line, 380.0, 780.0) == pytest.approx(10.0, rel=0.01)
 
 
 def _draw(bands: BandLayout, density, count: int, seed: int):
@@ -170,5 +200,5 @@ def test_cornell_box_under_f11_matches_path(tmp_path: Path) -> None:
     scene = example("cornell_box", width=32, height=32, spp=512, bands=8, max_depth=5)
     for emitter in scene["emitters"]:
         emitter["spectrum"] = {"type": "cie_f", "name": "F11"}
-    assert scene["film"].get("wavelength_sampling", "importance") == "importance"
+    assert sampling_mode(validate_scene(scene)) == "importance"  # the default, auto, sees F11's lines
     assert_agreement(scene, tmp_path, path_spp=128)
