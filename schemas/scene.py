@@ -282,6 +282,10 @@ class PerspectiveCamera(StrictModel):
         return 40.0
 
 
+#: ``film.wavelength_sampling``: how a sample's wavelengths are drawn (docs/scenes.md, Film).
+WavelengthSampling = Literal["auto", "uniform", "importance"]
+
+
 class Film(StrictModel):
     """Image size and sampling: ``bands`` spectral bins spanning [wavelength_min_nm, wavelength_max_nm]."""
 
@@ -298,6 +302,11 @@ class Film(StrictModel):
     #: ``hg_path``: partially coherent light transport (the paper's PLT); ``rlt``: the radiometric baseline
     #: (a fully coherent plane wave per sample, no shape matrix; worker/render/rlt.py).
     integrator: Literal["hg_path", "rlt"] = "hg_path"
+    #: How each sample's four wavelengths are drawn (worker/render/wavelength_sampling.py): ``importance``
+    #: concentrates them where the emitters emit, by a defensive mixture with uniform sampling (a
+    #: fluorescent lamp's lines no longer speckle colours); ``uniform``: uniformly over the range; ``auto``
+    #: (default): ``importance`` when the emitters' spectra have lines, else ``uniform``.
+    wavelength_sampling: WavelengthSampling = "auto"
 
     @model_validator(mode="after")
     def _range(self) -> Film:

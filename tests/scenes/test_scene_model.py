@@ -183,6 +183,15 @@ def test_unknown_material_reference_and_extra_fields_are_located() -> None:
     assert [p["pointer"] for p in problems_of(data)] == ["/shapes/0/colour"]
 
 
+def test_wavelength_sampling_defaults_to_auto_and_is_validated() -> None:
+    assert validate_scene(minimal_scene()).film.wavelength_sampling == "auto"
+    for mode in ("uniform", "importance"):
+        chosen = minimal_scene() | {"film": {"wavelength_sampling": mode}}
+        assert validate_scene(chosen).film.wavelength_sampling == mode
+    problems = problems_of(minimal_scene() | {"film": {"wavelength_sampling": "hero"}})
+    assert [p["pointer"] for p in problems] == ["/film/wavelength_sampling"]
+
+
 def test_strings_are_not_coerced_to_numbers_and_nan_is_rejected() -> None:
     data = minimal_scene()
     data["shapes"][0]["radius_m"] = "1.0"

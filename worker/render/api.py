@@ -33,6 +33,7 @@ from schemas.scene import ABSOLUTE_MAX_SPP, Scene
 from schemas.validation import validate_scene
 from worker.render.renderer import Renderer, tile_bands
 from worker.render.scene_compiler import SceneCompiler
+from worker.render.wavelength_sampling import sampling_mode
 
 ProgressCallback = Callable[[float], None]
 RoundCallback = Callable[[RunningSums, ImageErrors, list[dict[str, Any]]], None]
@@ -232,6 +233,7 @@ def write_merged(
         "modes": film.modes,
         "max_depth": film.max_depth,
         "integrator": film.integrator,
+        "wavelength_sampling": sampling_mode(parsed),  # auto resolved
         "chunks": chunks,
         "variant": load_mitsuba().variant(),
         "render_seconds": seconds,

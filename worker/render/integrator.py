@@ -68,6 +68,7 @@ from worker.render.emitters import (
     emitter_rect_modes,
     sphere_solid_angle,
 )
+from worker.render.wavelength_sampling import lane_weights
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
 # (``load_mitsuba`` honours HGRENDER_VARIANT; ``auto`` picks cuda_ad_spectral when a GPU is usable).
@@ -266,7 +267,8 @@ def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
 
 
 def _luminance(y_weights: list[mi.Float], value: mi.Spectrum) -> mi.Float:
-    """Y of a four-wavelength spectral estimate: Σ_j w_j·value_j with w_j = (Λ/4)·ȳ(λ_j) (CIE 1931 ȳ)."""
+    """Y of a four-wavelength spectral estimate: Σ_j w_j·value_j with w_j = ω_j·ȳ(λ_j) (CIE 1931 ȳ),
+    ω_j = 1/(4 p(λ_j)) the lane's weight (``wavelength_sampling.lane_weights``; Λ/4 when uniform)."""
     total = mi.Float(0.0)
     for j in range(len(y_weights)):
         total += y_weights[j] * value[j]
@@ -594,7 +596,16 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
     # ------------------------------------------------------------------ the path loop
     @dr.syntax
-    def trace(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active: mi.Bool) -> PathResult:
+    def trace(
+        self,
+        scene: mi.Scene,
+        sampler: mi.Sampler,
+        ray: mi.Ray3f,
+        active: mi.Bool,
+        wavelength_ratios: list[mi.Float] | None = None,
+    ) -> PathResult:
+        """One path per lane of ``ray``; ``wavelength_ratios``: (1/Λ)/p(λ_j) of the wavelengths' sampling
+        density (``worker.render.wavelength_sampling``; None: uniform), for the luminance weights."""
         # (``self.context`` is read through ``self``: a dataclass local would become loop state.)
         kernels = self.kernels
         has_film = kernels.has(mat.INTERFERENCE_KINDS)
@@ -603,9 +614,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         span_nm = self.context.bands.wavelength_max_nm - self.context.bands.wavelength_min_nm
 
         wavelengths = mi.Spectrum(ray.wavelengths)
-        y_weights = [
-            mi.cie1931_y(wavelengths[j]) * (span_nm / len(wavelengths)) for j in range(len(wavelengths))
-        ]
+        lane_weight = lane_weights(span_nm, len(wavelengths), wavelength_ratios)
+        y_weights = [mi.cie1931_y(wavelengths[j]) * lane_weight[j] for j in range(len(wavelengths))]
         # Loop state (Dr.Jit traverses each struct): the estimator, the pending coherence record and its
         # film, the first non-specular vertex, the diagnostics sums and the first-hit AOVs.
         path = PathState()

@@ -26,6 +26,7 @@ from worker.render.emitters import CylinderModes, EmitterKind
 from worker.render.integrator import RenderContext, register
 from worker.render.rlt import integrator_class
 from worker.render.scene_compiler import CompiledScene
+from worker.render.wavelength_sampling import WavelengthSampler, lane_weights, scene_density
 
 MAX_WAVEFRONT = 1 << 20  # samples per pass: ~60 float32 outputs each stay in memory until reduced
 TILE_PIXELS = 1 << 18
@@ -73,6 +74,10 @@ class Renderer:
         self.integrator = integrator_class(compiled.scene.film.integrator)(mi.Properties())
         self.integrator.max_depth = compiled.scene.film.max_depth
         self.integrator.attach(self._context())
+        # film.wavelength_sampling: uniform, or the scene's importance density (tabulated once here).
+        self.wavelengths = WavelengthSampler(
+            mi, compiled.bands, scene_density(compiled.scene, compiled.bands)
+        )
 
     def _context(self) -> RenderContext:
         mi = self.mi
@@ -226,34 +231,31 @@ class Renderer:
         )
         ray, _ = self.sensor.sample_ray(0.0, sampler.next_1d(), film_position, sampler.next_2d())
         span = bands.wavelength_max_nm - bands.wavelength_min_nm
-        offset = sampler.next_1d()
-        wavelengths = mi.Spectrum(0.0)
+        # The hero set and each lane's weight (worker.render.wavelength_sampling): ρ_λ,j = (1/Λ)/p(λ_j).
+        hero_set = self.wavelengths.sample(sampler.next_1d())
+        wavelengths = hero_set.wavelengths
         lane_count = len(wavelengths)
-        for j in range(lane_count):
-            fraction = offset + j / lane_count
-            wavelengths[j] = bands.wavelength_min_nm + span * (fraction - dr.floor(fraction))
         ray = mi.Ray3f(ray.o, ray.d, ray.maxt, ray.time, wavelengths)
-        result = self.integrator.trace(self.scene, sampler, ray, mi.Bool(True))
+        result = self.integrator.trace(self.scene, sampler, ray, mi.Bool(True), hero_set.ratios)
 
+        radiance = [result.radiance[j] for j in range(lane_count)]
+        if hero_set.ratios is not None:
+            radiance = [radiance[j] * hero_set.ratios[j] for j in range(lane_count)]
+        weights = lane_weights(span, lane_count, hero_set.ratios)
         band_scale = span / bands.width_nm / lane_count
         band_values = []
         for band in range(bands.band_count):
             value = mi.Float(0.0)
             for j in range(lane_count):
-                band_of_lane = mi.UInt32(
-                    dr.clip(
-                        (wavelengths[j] - bands.wavelength_min_nm) / bands.width_nm, 0, bands.band_count - 1
-                    )
-                )
-                value += dr.select(band_of_lane == band, result.radiance[j], 0.0)
+                value += dr.select(hero_set.band_of_lane[j] == band, radiance[j], 0.0)
             band_values.append(value * band_scale)
         xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
         albedo_xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
         for j in range(lane_count):
             cmf = mi.cie1931_xyz(wavelengths[j])
             for c in range(3):
-                xyz[c] += cmf[c] * result.radiance[j] * (span / lane_count)
-                albedo_xyz[c] += cmf[c] * result.albedo[j] * (span / lane_count) * mi.MI_CIE_Y_NORMALIZATION
+                xyz[c] += cmf[c] * result.radiance[j] * weights[j]
+                albedo_xyz[c] += cmf[c] * result.albedo[j] * weights[j] * mi.MI_CIE_Y_NORMALIZATION
         per_sample = {
             "diag_w": result.diag_weight,
             "diag_mxx": result.diag_mxx,

@@ -1,10 +1,9 @@
-"""Spectral bands, wavelength sampling and spectral lookup tables for the ``hg_path`` integrator.
+"""Spectral lookup tables for the ``hg_path`` integrator.
 
-Each camera sample carries four wavelengths (Mitsuba's spectral variants are four-wide), drawn by
-stratified hero-wavelength sampling over [λ_min, λ_max]: λ_j = λ_min + Λ·frac(u + j/4), Λ = λ_max − λ_min,
-each with pdf 1/Λ (nm⁻¹). Band b of width Δ_b is then estimated per sample as
-(1/4) Σ_j L(λ_j)·1_b(λ_j)·Λ/Δ_b, an unbiased estimator of the band-averaged spectral radiance
-(1/Δ_b)∫_b L dλ in W·m⁻²·sr⁻¹·nm⁻¹.
+Each camera sample carries four wavelengths (Mitsuba's spectral variants are four-wide); how they are drawn
+and what each is worth in the bands is ``worker.render.wavelength_sampling``'s (uniform:
+λ_j = λ_min + Λ·frac(u + j/4), band b estimated per sample as (1/4) Σ_j L(λ_j)·1_b(λ_j)·Λ/Δ_b, an unbiased
+estimator of the band-averaged spectral radiance (1/Δ_b)∫_b L dλ in W·m⁻²·sr⁻¹·nm⁻¹).
 
 Material spectra (reflectances, refractive indices) live in one flat table sampled on a regular grid
 (``GRID_MIN_NM`` … ``GRID_MAX_NM`` every ``GRID_STEP_NM``) and are linearly interpolated in the kernel.
