@@ -711,6 +711,19 @@ class ThinFilmMaterial(_ScatteringMaterial):
     psd_exponent: Annotated[float, Field(gt=1.0, le=10.0)] = 2.0
     #: Number of multiply-reflected beams summed in the film (2 = the paper's two-beam form).
     beams: Annotated[int, Field(ge=2, le=8)] = 4
+    #: The film's extinction κ_f (dimensionless, constant over wavelength): index n_f + iκ_f, an absorbing
+    #: coating such as silver-sulfide tarnish; conductor substrates only (hgcore.optics.thin_film).
+    film_extinction: Annotated[float, Field(ge=0.0, le=10.0)] = 0.0
+
+    @model_validator(mode="after")
+    def _absorbing_needs_conductor(self) -> ThinFilmMaterial:
+        if self.film_extinction > 0.0 and _substrate_kind(self.substrate) == "dielectric":
+            raise InputError(
+                "film_extinction: an absorbing film (film_extinction > 0) needs a conductor substrate; on a "
+                "dielectric substrate its transmittance is not 1 − R (the film absorbs), which the renderer "
+                "does not model"
+            )
+        return self
 
 
 #: Optical-disc presets: track pitch (µm) and pit depth (nm) — CD: 1.6 µm, DVD: 0.74 µm (ECMA-130/267).

@@ -1,8 +1,9 @@
-"""Partially-coherent reflectance of a thin dielectric film over a substrate: Eq. (18) generalised to P beams.
+"""Partially-coherent reflectance of a thin film over a substrate: Eq. (18) generalised to P beams.
 
-Layers: exterior (real index n_0) | film (real index n_f, thickness τ in m) | substrate (η_s = n + iκ,
-dielectric or conductor). With the interface amplitudes of ``hgcore.optics.fresnel`` (per polarisation) the
-beams leaving the film are
+Layers: exterior (real index n_0) | film (index η_f = n_f + iκ_f, thickness τ in m: real for a clear
+coating, complex for an absorbing one, e.g. silver-sulfide tarnish) | substrate (η_s = n + iκ, dielectric
+or conductor). With the interface amplitudes of ``hgcore.optics.fresnel`` (per polarisation) the beams
+leaving the film are
 
     a_0 = r_01,    a_p = t_01 t_10 r_12 (r_10 r_12)^{p−1} e^{i p δ}  (p ≥ 1),    δ = 2 k q_1 τ,
 
@@ -21,6 +22,16 @@ formula |(r_01 + r_12 e^{iδ})/(1 + r_01 r_12 e^{iδ})|²; V_d = 0 gives the inc
 supplies V_1 … V_{P−1} (dimensionless, in [0, 1]); for a 0th-mode (Gaussian) CSD they are
 V_d = V_1^{d²} (:func:`gaussian_visibilities`). Element-wise against ``ops``: runs on NumPy and in Dr.Jit.
 
+Absorbing films (κ_f > 0). Nothing above assumes a real η_f: q_1 = √(η_f² − ν²) is taken on the principal
+branch (Im q_1 > 0 for κ_f > 0 at every angle), the interface amplitudes and the Stokes relations
+r_10 = −r_01, t_01 t_10 = 1 − r_01² are algebraic identities of the q's and η's (``hgcore.optics.fresnel``),
+and the round-trip factor e^{iδ} = e^{i 2k Re(q_1) τ}·e^{−2k Im(q_1) τ} now also carries the film's
+attenuation over the round trip, so every a_p already includes the loss of its p round trips. The
+reflected beams travel in the real exterior, so |a_p|² is beam p's power and R(V) keeps its meaning. Only
+the transmittance changes: T = 1 − R (:func:`transmission_terms`) needs a lossless film; an absorbing film
+on a dielectric is rejected (:func:`validate_thin_film`), on a conductor nothing is transmitted and the
+absorptance is A = 1 − R.
+
 All beams (:func:`film_reflectance_terms`, what the renderer uses). Truncating the series at P beams is
 not bounded: near grazing incidence |r_10 r_12| → 1 on a metal, the partial sums of Σ a_p e^{ipφ} overshoot
 and R exceeds 1 (7 beams on silver at 85°: R = 1.14; Eq. (18)'s two beams: up to 1.39 on silver at grazing
@@ -31,7 +42,13 @@ grazing incidence),
     R_incoherent = |r_01|² + |A|²/(1 − |b|²),
     Σ_p a_{p+d} a_p* = C b^{d−1},    C = A r_01* + |A|² b/(1 − |b|²),
 
-per polarisation, so X_d = Re(C b^{d−1}) for every separation d ≥ 1. The caller knows V_1 … V_{P−1}; the
+per polarisation, so X_d = Re(C b^{d−1}) for every separation d ≥ 1. Derivation (valid for complex A, b,
+r_01, i.e. absorbing films): Σ_{p≥1} |a_p|² = |A|² Σ_{m≥0} |b|^{2m} and Σ_{p≥1} a_{p+d} a_p* =
+A b^d A* Σ_{m≥0} |b|^{2m}, plus the p = 0 term a_d r_01* = A b^{d−1} r_01*; both geometric series converge
+iff |b| < 1. Absorption only helps: |b| = |r_10 r_12|·e^{−2k Im(q_1) τ} with Im q_1 > 0, and
+|r_10 r_12| < 1 for passive media at the indices a scene admits (κ_f ≤ 10; checked over a grid of
+absorbing films on Ag and Au, tests/optics/test_thin_film_absorbing.py). Σ_{d≥P−1} C b^{d−1} =
+C b^{P−2}/(1 − b) needs the same |b| < 1. The caller knows V_1 … V_{P−1}; the
 separations d ≥ P − 1 are summed together with V_{P−1}: X_{P−1} = Re(C b^{P−2}/(1 − b)). This is exact for
 V ≡ 1 (the Airy formula, every P) and for V ≡ 0 (the infinite incoherent sum). On a metal the all-beam
 fringes are far shallower than the truncated ones: C ∝ (1 − |r_12|²) at normal incidence, and for
@@ -57,6 +74,9 @@ from hgcore.errors import InputError
 from hgcore.optics.array_ops import ArrayOps
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import interface_amplitudes, normal_factor
+
+#: Largest film extinction κ_f a scene may give (even metal-like absorbing coatings stay below 10).
+MAX_FILM_EXTINCTION = 10.0
 
 
 def gaussian_visibilities(first_visibility: Any, count: int, ops: ArrayOps) -> list[Any]:
@@ -128,7 +148,8 @@ def film_amplitudes(
     """Beam amplitudes (s, p) a_0 … a_{P−1} of a film of thickness τ (m) and index n_f on a substrate.
 
     ``cos_theta_i`` is the cosine of the angle of incidence in the exterior medium (taken by magnitude);
-    ``substrate_eta`` the substrate's complex index (``ComplexPair``; κ = 0 for a dielectric).
+    ``substrate_eta`` the substrate's complex index (``ComplexPair``; κ = 0 for a dielectric), ``film_ior``
+    the film's index, real or a ``ComplexPair`` n_f + iκ_f for an absorbing film (module docstring).
     """
     top, bottom, film_phase = _film_interfaces(
         cos_theta_i, wavelength_m, thickness_m, film_ior, substrate_eta, exterior_ior, ops
@@ -169,9 +190,10 @@ def film_reflectance_terms(
 ) -> list[Any]:
     """[R_incoherent, X_1, …, X_{P−1}] of the film with *every* beam (module docstring: "All beams"),
     unpolarised, for ``beam_count`` = P ≥ 3: X_{P−1} holds all separations d ≥ P − 1. Arguments as in
-    :func:`film_amplitudes`; combine with V_1 … V_{P−1} (:func:`bounded_reflectance`): exact Airy for
-    V ≡ 1, the infinite incoherent sum for V ≡ 0. P = 2 is Eq. (18) itself, the paper's two-beam
-    truncation (:func:`reflectance_terms` of two beams), which a scene asks for explicitly.
+    :func:`film_amplitudes` (``film_ior`` real or complex); combine with V_1 … V_{P−1}
+    (:func:`bounded_reflectance`): exact Airy for V ≡ 1, the infinite incoherent sum for V ≡ 0. P = 2 is
+    Eq. (18) itself, the paper's two-beam truncation (:func:`reflectance_terms` of two beams), which a
+    scene asks for explicitly.
     """
     if beam_count <= 2:
         # Eq. (18) as the paper writes it: the scene asked for the two-beam truncation
@@ -215,6 +237,11 @@ def transmission_terms(terms: Sequence[Any]) -> list[Any]:
     transmitted beams, both computed from the transmitted amplitudes directly. With P beams the neglected
     ones (≤ the truncation bound of the module docstring) go to T instead of being lost; with
     :func:`film_reflectance_terms` there are none.
+
+    Lossless films only: an absorbing film (κ_f > 0) on a dielectric absorbs A(V) > 0, and its R differs
+    between the exterior and the substrate side, which the renderer's film-on-glass sampling relies on
+    being equal. :func:`validate_thin_film` rejects that combination rather than return a T that violates
+    energy conservation.
     """
     return [1.0 - terms[0], *(-term for term in terms[1:])]
 
@@ -299,7 +326,20 @@ def film_shear(
     docs/physics_interactions.md §3 compares this with Eq. (18)'s reading τ sin θ_0 (the projection of τn̂).
     Beyond the film's critical angle (n_0 sin θ_0 ≥ n_f) no beam propagates in the film: s = 0 there (the
     later beams' amplitudes vanish with e^{iδ}).
+
+    An absorbing film (η_f = n_f + iκ_f) has no real refraction angle: the wave's planes of constant phase
+    and of constant amplitude differ (an inhomogeneous wave). ``film_ior`` is then its real part n_f (a
+    ``ComplexPair`` is reduced to it here), i.e. the weak-absorption ray picture, in which the energy
+    travels along the phase normal. Its error is second order in κ_f/n_f: the phase fronts in the film
+    refract at tan θ_t' = ν/Re q_1, and with q_1² = n_f² − κ_f² − ν² + 2i n_f κ_f,
+    Re q_1 = n_f cos θ_t·(1 + ½ κ_f² ν²/(n_f² cos² θ_t)² + O(κ_f⁴)), so tan θ_t overestimates tan θ_t' by the
+    relative amount ½ (κ_f/n_f)² tan² θ_t / cos² θ_t: 2 % for κ_f/n_f = 0.3 at θ_t = 30°, < 0.5 % for a
+    tarnish-like n_f 2.7, κ_f 0.6 from air (θ_t ≤ 21.7°). The shear only sets the visibilities
+    V_d = μ(d·s), which vary
+    slowly with |s|.
     """
+    if isinstance(film_ior, ComplexPair):
+        film_ior = film_ior.re
     along = incident_direction[0] * normal[0] + incident_direction[1] * normal[1]
     along = along + incident_direction[2] * normal[2]
     tangential = tuple(incident_direction[i] - along * normal[i] for i in range(3))
@@ -311,8 +351,28 @@ def film_shear(
     return (scale * tangential[0], scale * tangential[1], scale * tangential[2])
 
 
-def validate_thin_film(thickness_m: float, film_ior: float, exterior_ior: float) -> None:
-    """Scene-level checks of the film constants (the kernels above cannot raise on Dr.Jit arrays)."""
+def validate_thin_film(
+    thickness_m: float,
+    film_ior: float,
+    exterior_ior: float,
+    film_extinction: float = 0.0,
+    dielectric_substrate: bool = False,
+) -> None:
+    """Scene-level checks of the film constants (the kernels above cannot raise on Dr.Jit arrays).
+
+    ``film_extinction`` κ_f (dimensionless, ≥ 0) is the film's extinction; an absorbing film is accepted
+    on conductor substrates only (:func:`transmission_terms`: T = 1 − R holds for lossless films).
+    """
+    if not (math.isfinite(film_extinction) and 0.0 <= film_extinction <= MAX_FILM_EXTINCTION):
+        raise InputError(
+            f"film_extinction: must be a finite extinction in [0, {MAX_FILM_EXTINCTION:g}], "
+            f"got {film_extinction}"
+        )
+    if film_extinction > 0.0 and dielectric_substrate:
+        raise InputError(
+            "film_extinction: an absorbing film (κ > 0) needs a conductor substrate; on a dielectric its "
+            "transmittance is not 1 − R (the film absorbs), which the renderer does not model"
+        )
     if not (math.isfinite(thickness_m) and thickness_m >= 0.0):
         raise InputError(f"thickness_m: must be a finite length ≥ 0 m, got {thickness_m}")
     if not (math.isfinite(film_ior) and film_ior >= 1.0):

@@ -175,19 +175,28 @@ def bare_silver(scene: dict) -> dict:
     return {**scene, "materials": {**scene["materials"], "coated_silver": bare}}
 
 
+#: How many times bare silver's chromaticity spread the coated shell's must exceed under the sphere:
+#: "clearly visible" interference colours, not a tint (measured 128², 128 spp: see the test's print).
+VIVID_FACTOR = 3.0
+
+
 @pytest.mark.slow
 def test_sphere_source_shows_the_film_colours_across_the_highlight(tmp_path: Path) -> None:
     """Fig. 7 (left): the film's colour follows its phase 2 n_f τ cos θ_t, and θ_t changes across the rough
     highlight, so the coated shell's lit part changes hue from place to place; the same shell in bare rough
-    silver (same roughness, same light, no film) shows the lobe's own shading colour only. Asserted: the
-    coated shell's chromaticity spread is above the just-noticeable difference, above the bare shell's, and
-    both by more than 4 standard errors (Monte Carlo, from a second seed: ``chromatic_spread``)."""
+    silver (same roughness, same light, no film) shows the lobe's own shading colour only. The coating
+    absorbs (κ_f 0.12, docs/physics_interactions.md §3), so its fringes are deep and the colours vivid, not
+    the pastel of a clear film on silver (spread 3.9 ± 0.1 vs bare 2.2 ± 0.2 with the former n 2.4 clear
+    film). Asserted: the coated shell's chromaticity spread is above the just-noticeable difference, and
+    more than ``VIVID_FACTOR`` × the bare shell's, each by more than 4 standard errors (Monte Carlo, from a
+    second seed: ``chromatic_spread``)."""
     scene = example("fig7_thin_film_sphere_light", width=128, height=128, spp=128)
     coated, coated_error = chromatic_spread(scene, tmp_path, "coated")
     silver, silver_error = chromatic_spread(bare_silver(scene), tmp_path, "bare")
+    print(f"spread: coated {coated:.2f} ± {coated_error:.2f}, bare silver {silver:.2f} ± {silver_error:.2f}")
 
     assert coated > LAB_JND + 4.0 * coated_error
-    assert coated - silver > 4.0 * math.hypot(coated_error, silver_error)
+    assert coated - VIVID_FACTOR * silver > 4.0 * math.hypot(coated_error, VIVID_FACTOR * silver_error)
 
 
 def shear_along_tube_m(scene: dict, normal_x: float) -> float:
@@ -229,8 +238,11 @@ def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_
     measured in the EXR), across it ℓ₁ ≫ |s|, and under the sphere V ≈ 1 everywhere. s⊥·x̂ grows with the
     normal's tilt n_x along the tube (zero on the crest), so the cylinder/sphere ratio of the film's colour
     is ≈ 1 on the crest and falls with |n_x|; V(n_x) with s computed at the top of the shell for a normal
-    bisecting the directions to the light and the camera, tilted to n_x. Asserted, each by 4 standard
-    errors of the bins: the crest's ratio (|n_x| < 0.15) is not below V(0.15), the flanks' (|n_x| ≥ 0.3)
+    bisecting the directions to the light and the camera, tilted to n_x. The coating absorbs, so at V = 0
+    it still departs from bare silver by its incoherent tint (|r_01|² + |A|²/(1 − |b|²) against silver's
+    Fresnel R: 5–6 CIELAB units at L* 76 under F7 over 0°–60°, its coherent fringes 20–80), a floor of
+    ≲ 0.25 under the flanks' ratio, below V(0.3) ≈ 0.6. Asserted, each by 4 standard errors of the bins:
+    the crest's ratio (|n_x| < 0.15) is not below V(0.15), the flanks' (|n_x| ≥ 0.3)
     is below V(0.3), and the crest keeps more of the colour than the flanks."""
     size_px, bin_px = 96, 2
     departures = {}
@@ -272,6 +284,7 @@ def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_
         ratio = means["cylinder"] / means["sphere"]
         error = ratio * math.hypot(errors["cylinder"] / means["cylinder"], errors["sphere"] / means["sphere"])
         ratios[band] = (ratio, error)
+        print(f"{band}: sph {means['sphere']:.1f} cyl {means['cylinder']:.1f}, {ratio:.2f} ± {error:.2f}")
         if band == "crest":  # every crest bin has V ≥ V(0.15): the colour is kept
             assert means["cylinder"] > LAB_JND + 4.0 * errors["cylinder"]
             assert ratio > visibility(0.15) - 4.0 * error, (ratio, error, visibility(0.15))

@@ -358,3 +358,28 @@ def test_schemas_package_does_not_import_mitsuba_or_drjit() -> None:
         "assert not bad, bad"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+def absorbing_film_scene(substrate: dict, extinction: Any) -> dict:
+    scene = minimal_scene()
+    scene["materials"]["coated"] = {
+        "type": "thin_film",
+        "film_thickness_um": 0.12,
+        "film_ior": 2.7,
+        "film_extinction": extinction,
+        "substrate": substrate,
+    }
+    scene["shapes"][0]["material"] = "coated"
+    return scene
+
+
+def test_film_extinction_is_validated_and_named() -> None:
+    """κ_f ∈ [0, 10], and an absorbing film only on a conductor (T = 1 − R needs a lossless film)."""
+    coated = validate_scene(absorbing_film_scene({"conductor": "Ag"}, 0.4)).materials["coated"]
+    assert coated.film_extinction == 0.4
+    assert validate_scene(absorbing_film_scene({"ior": 1.5}, 0.0)).materials["coated"].film_extinction == 0.0
+    for extinction in (-0.1, 10.5, "tarnish"):
+        (problem,) = problems_of(absorbing_film_scene({"conductor": "Ag"}, extinction))
+        assert problem["pointer"] == "/materials/coated/film_extinction", problem
+    (problem,) = problems_of(absorbing_film_scene({"ior": 1.5}, 0.4))
+    assert "film_extinction" in problem["message"] and "conductor substrate" in problem["message"], problem

@@ -52,7 +52,8 @@ LOBE_WIDTH_PER_M = 19
 MAX_ORDER = 20
 DISPERSIVE = 21  # 1 when the dielectric index varies with wavelength
 FILM_TRANSMITS = 22  # 1 for a thin film on a dielectric substrate (reflects and transmits)
-STRIDE = 23
+FILM_EXTINCTION = 23  # the film's extinction κ_f (constant over wavelength; 0: a clear film)
+STRIDE = 24
 
 # 0: no override; a non-specular vertex is a secondary source sized by the lit patch (docs/physics.md §7).
 DEFAULT_SCATTERING_REGION_RADIUS_M = 0.0
@@ -115,3 +116,10 @@ class MaterialTable:
     def max_beams(self) -> int:
         beams = [int(r.values.get(BEAMS, 0)) for r in self.records if r.kind == MaterialKind.THIN_FILM]
         return max(beams, default=0)
+
+    def film_absorbing(self) -> bool:
+        """Whether some thin film of the scene absorbs (κ_f > 0): only then do the kernels carry a complex
+        film index, so that scenes of clear films trace exactly the real-index arithmetic."""
+        return any(
+            r.values.get(FILM_EXTINCTION, 0.0) > 0.0 for r in self.records if r.kind == MaterialKind.THIN_FILM
+        )

@@ -171,6 +171,8 @@ class SceneCompiler:
             values[mat.FILM_THICKNESS_M] = material.film_thickness_um * 1e-6
             values[mat.FILM_IOR_ID] = spectra_table.add(_ior_on_grid(material.film_ior, grid)[0])
             values[mat.BEAMS] = float(material.beams)
+            if material.film_extinction > 0.0:
+                values[mat.FILM_EXTINCTION] = material.film_extinction
             if hasattr(material.substrate, "conductor"):
                 conductor(material.substrate.conductor)
             else:

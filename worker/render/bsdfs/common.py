@@ -126,6 +126,8 @@ class MaterialParams:
         self.visibility = visibility
         #: beams of the partially coherent film sums (the largest of the scene's films, at least two)
         self.max_beams = max(materials.max_beams(), 2)
+        #: some film absorbs: the film index is complex, n_f + iκ_f (``materials.FILM_EXTINCTION``)
+        self.film_absorbing = materials.film_absorbing()
 
     def param(self, material: mi.UInt32, offset: int) -> mi.Float:
         return dr.gather(mi.Float, self.table, material * mat.STRIDE + offset)

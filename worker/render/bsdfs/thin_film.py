@@ -9,7 +9,8 @@ R(V)/R_incoherent once the path has reached the light's source and its coherence
 
 The interference phase is taken along ``wo_phase``: towards the emitter's centre for light from an emitter
 (BRIEF: sampled emitter points serve radiometry only), else the sampled direction. On a dielectric
-substrate the film also transmits T(V) = 1 − R(V), specularly, into and out of the substrate.
+substrate the film also transmits T(V) = 1 − R(V), specularly, into and out of the substrate (clear films
+only: the schema accepts an absorbing film, index n_f + iκ_f, on conductors alone).
 """
 
 from __future__ import annotations
@@ -43,10 +44,12 @@ def film_terms(
     params: MaterialParams, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum
 ) -> list[mi.Spectrum]:
     """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i, with every
-    beam (``hgcore.optics.thin_film.film_reflectance_terms``)."""
+    beam (``hgcore.optics.thin_film.film_reflectance_terms``). The film's index is n_f + iκ_f where a film
+    of the scene absorbs (``MaterialParams.film_absorbing``), else the real n_f as before."""
     exterior = params.param(material, mat.EXTERIOR_IOR)
     thickness_m = params.param(material, mat.FILM_THICKNESS_M)
-    film_ior = params.spectrum(material, mat.FILM_IOR_ID, wavelengths)
+    film_n = params.spectrum(material, mat.FILM_IOR_ID, wavelengths)
+    film_kappa = params.param(material, mat.FILM_EXTINCTION) if params.film_absorbing else None
     substrate_n = params.spectrum(material, mat.ETA_ID, wavelengths)
     substrate_k = params.spectrum(material, mat.KAPPA_ID, wavelengths)
     terms = [mi.Spectrum(0.0) for _ in range(params.max_beams)]
@@ -56,7 +59,7 @@ def film_terms(
             cos_i,
             wavelengths[j] * 1e-9,
             thickness_m,
-            film_ior[j],
+            film_n[j] if film_kappa is None else ComplexPair(film_n[j], film_kappa),
             ComplexPair(substrate_n[j], substrate_k[j]),
             exterior,
             params.max_beams,
