@@ -92,7 +92,14 @@ def test_a_time_budget_stops_the_rounds(scene: dict, tmp_path: Path) -> None:
     summary = render_scene(scene, tmp_path, target=NoiseTarget(rel_error=1e-6, time_budget_s=3.0))
     block = summary["noise_target"]
     assert not block["met"] and block["stop_reason"] == "time_budget"
-    assert block["rounds"][-1]["seconds"] <= 3.0 * 1.5  # the last round is sized to what was left
+    # The last round was sized to the budget left at the rate measured before it (wall time elapsed
+    # then ≥ the render time recorded): asserted on the recorded figures, not on this machine's speed
+    # while the round ran, which a loaded machine can change.
+    rounds = block["rounds"]
+    assert len(rounds) >= 2
+    before, last = rounds[-2], rounds[-1]
+    seconds_per_spp = before["seconds"] / before["spp"]
+    assert last["spp"] - before["spp"] <= (3.0 - before["seconds"]) / seconds_per_spp
 
 
 def test_next_round_prediction_and_caps() -> None:
