@@ -62,6 +62,7 @@ from worker.render.bsdfs.lobes import mean_over_wavelengths
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import (
     CylinderModes,
+    EmitterKind,
     emitter_coherence,
     emitter_direction,
     emitter_is_rect,
@@ -146,8 +147,10 @@ class PathState:
     # r_k = Π_v p_k(v)/Π_v p_hero(v) is the path's density had λ_k been the hero relative to the hero's own.
     hero_ratio: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(1.0))
     depth: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
-    # the previous vertex, for MIS of emission reached by material sampling
-    prev_si: mi.SurfaceInteraction3f = field(default_factory=lambda: dr.zeros(mi.SurfaceInteraction3f))
+    # the previous vertex, for MIS of emission reached by material sampling: its position, normal, time
+    # and wavelengths (what Mitsuba's emitter densities read; the whole SurfaceInteraction3f would be
+    # 40 more floats of loop state)
+    prev_si: mi.Interaction3f = field(default_factory=lambda: dr.zeros(mi.Interaction3f))
     prev_pdf: mi.Float = field(default_factory=lambda: mi.Float(1.0))
     prev_delta: mi.Bool = field(default_factory=lambda: mi.Bool(True))
     prev_skip_emission: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # NEE-only lobes
@@ -350,13 +353,21 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         registry_id = dr.reinterpret_array(mi.UInt32, emitter_ptr)
         return dr.gather(mi.UInt32, self.context.emitter_index, registry_id)
 
+    def _has_sphere_emitters(self) -> bool:
+        """Whether the scene has a sphere emitter (decided when the kernel is traced): without one the
+        stable cone density and its NEE weight (``_emitter_pdf``) would select Mitsuba's in every lane, at
+        the cost of their table reads and an emitter ``eval_direction`` virtual call per bounce."""
+        return EmitterKind.SPHERE in self.context.emitter_kinds
+
     def _emitter_pdf(
-        self, scene: mi.Scene, mitsuba_pdf: mi.Float, em_record: mi.UInt32, distance_m: mi.Float
+        self, scene: mi.Scene, mitsuba_pdf: mi.Float, em_record: mi.UInt32, distance_m: mi.Float | None
     ) -> mi.Float:
         """The solid-angle density of emitter sampling towards emitter ``em_record`` from a receiver
         ``distance_m`` from its centre: Mitsuba's, except for spheres seen from outside, whose uniform cone
         has the density selection/Ω with Ω from ``emitters.sphere_solid_angle`` (Mitsuba's float32 cone
         pdf is 3 % high for a 1 mm sphere at 0.6 m and infinite below a/d ≈ 2.4e-4)."""
+        if not self._has_sphere_emitters():
+            return mitsuba_pdf  # (the select below would take Mitsuba's in every lane)
         sphere, solid_angle = sphere_solid_angle(mi, self.context.emitter_flat, em_record, distance_m)
         selection = scene.pdf_emitter(em_record, sphere)
         return dr.select(sphere, selection / dr.maximum(solid_angle, 1e-30), mitsuba_pdf)
@@ -551,18 +562,48 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         )
         first_vertex.seen |= vertex.nonspecular
 
+    def _advance_throughput(self, path: PathState, sampled: MaterialSample, continue_path: mi.Bool) -> None:
+        """β and the hero-MIS ratios ρ after the sampled event, in the lanes ``continue_path``.
+
+        Without a kind whose sampling depends on the hero (``sampled.pdf_ratios`` is None: every q_k = 1)
+        the step p_eff/p_ref = mean_k ρ_k·1 is exactly 1 and ρ stays 1, so β·f/p_ref is all there is
+        (the same floats; ρ then leaves the loop state)."""
+        if sampled.pdf_ratios is None:
+            path.beta = dr.select(continue_path, path.beta * sampled.weight, 0.0)
+            return
+        ratio_step = mean_over_wavelengths(path.hero_ratio * sampled.pdf_ratios)
+        advance = continue_path & (ratio_step > 0.0)
+        path.beta = dr.select(advance, path.beta * sampled.weight / dr.maximum(ratio_step, 1e-30), 0.0)
+        path.hero_ratio = dr.select(
+            advance, path.hero_ratio * sampled.pdf_ratios / dr.maximum(ratio_step, 1e-30), path.hero_ratio
+        )
+
     @dr.syntax
     def _emitter_light(
-        self, needed: mi.Bool, em_record: mi.UInt32, distance_m: mi.Float, direction: mi.Vector3f
+        self,
+        needed: mi.Bool,
+        em_record: mi.UInt32,
+        receiver: mi.Point3f,
+        geometry: tuple[mi.Float, mi.Vector3f] | None,
     ) -> tuple[IncidentCoherence, CoherenceSample]:
-        """The coherence of the light of emitter ``em_record`` at a receiver ``distance_m`` from its centre
-        along ``direction`` (centre → receiver): Σ⊥ of its whole silhouette in a frame ⟂ ``direction``,
-        computed only in the lanes ``needed`` (zero elsewhere), and the diagnostics' record of it."""
+        """The coherence of the light of emitter ``em_record`` at ``receiver``, a distance r from its centre
+        along the direction d (centre → receiver): Σ⊥ of its whole silhouette in a frame ⟂ d, computed
+        only in the lanes ``needed`` (zero elsewhere), and the diagnostics' record of it.
+
+        ``geometry``: (r, d) where the caller reads them in every lane; ``None``: read here, in the lanes
+        ``needed`` only (the emitter table's centre, a norm and a division less per bounce elsewhere; the
+        other lanes' r is 0 there, and their diagnostics weight is 0)."""
         frame_x = mi.Vector3f(1.0, 0.0, 0.0)
         frame_y = mi.Vector3f(0.0, 1.0, 0.0)
         sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
         angle_terms = (mi.Float(0.0), mi.Float(0.0))
+        lazy = geometry is None
+        distance_m, direction = mi.Float(0.0), mi.Vector3f(0.0, 0.0, 1.0)
+        if not lazy:
+            distance_m, direction = geometry
         if needed:
+            if lazy:
+                distance_m, direction = emitter_direction(mi, self.context.emitter_flat, em_record, receiver)
             frame_x, frame_y = self._frame_for(direction)
             sigma = emitter_coherence(
                 mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, frame_x, frame_y
@@ -699,32 +740,40 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             mis = dr.select(path.prev_skip_emission, 0.0, mis)
             emitted = dr.select(hit_emitter, path.beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)
             path.L += emitted
-            counts_indirect = first_vertex.indirect_ready & first_vertex.seen
-            sums.add(dr.select(counts_indirect, _luminance(y_weights, emitted), 0.0), first_vertex.indirect)
 
             # ---------------------- Emitter sampling (next-event estimation) ---------------------
             do_nee = continue_path & nonspecular
             ds_em, em_weight = scene.sample_emitter_direction(si, nee_sample, False, do_nee)
             do_nee &= ds_em.pdf != 0.0
             em_record_nee = self._emitter_lookup(ds_em.emitter)
-            nee_r, nee_dir = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
+            # The emitter's centre as seen from here: read in every lane by spheres' stable density and by
+            # the coherence-sensitive terms (and, with plane waves, the diagnostics); else only where the
+            # emitter's coherence is needed (``_emitter_light``).
+            nee_geometry = None
+            nee_r = None
+            if self._has_sphere_emitters() or coherence_materials or self.plane_waves:
+                nee_geometry = emitter_direction(mi, self.context.emitter_flat, em_record_nee, si.p)
+                nee_r = nee_geometry[0]
             # Spheres: Mitsuba's weight L/pdf uses its float32 cone pdf (``_emitter_pdf``); with the stable
             # one it is L·Ω/selection. Visibility is tested here for all emitters, as Mitsuba would.
             em_pdf_nee = self._emitter_pdf(scene, ds_em.pdf, em_record_nee, nee_r)
-            sphere_nee, _ = sphere_solid_angle(mi, self.context.emitter_flat, em_record_nee, nee_r)
-            em_radiance = ds_em.emitter.eval_direction(si, ds_em, do_nee & sphere_nee)
-            em_weight = dr.select(sphere_nee, em_radiance / dr.maximum(em_pdf_nee, 1e-30), em_weight)
+            if self._has_sphere_emitters():
+                sphere_nee, _ = sphere_solid_angle(mi, self.context.emitter_flat, em_record_nee, nee_r)
+                em_radiance = ds_em.emitter.eval_direction(si, ds_em, do_nee & sphere_nee)
+                em_weight = dr.select(sphere_nee, em_radiance / dr.maximum(em_pdf_nee, 1e-30), em_weight)
             do_nee &= ~scene.ray_test(si.spawn_ray_to(ds_em.p), do_nee)
             # The emitter's Σ⊥ matters for diagnostics at the first non-specular vertex and for
             # coherence-sensitive materials; elsewhere the symbolic branch is skipped.
             needs_nee_coherence = do_nee & (~first_vertex.seen | coherence_materials) & (not self.plane_waves)
             nee_coherence, direct_sample = self._emitter_light(
-                needs_nee_coherence, em_record_nee, nee_r, nee_dir
+                needs_nee_coherence, em_record_nee, si.p, nee_geometry
             )
             wo_em = frame.to_local(ds_em.d)
             # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
             # and a thin film's interference phase; the sampled point serves the radiometric terms only.
-            wo_centre = wo_em if self.plane_waves else frame.to_local(-nee_dir)
+            wo_centre = wo_em
+            if coherence_materials and not self.plane_waves:
+                wo_centre = frame.to_local(-nee_geometry[1])
             wo_eval = wo_em
             if has_nee_only:
                 wo_eval = dr.select(nee_only, wo_centre, wo_em)
@@ -736,31 +785,31 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             mis_em = dr.select(ds_em.delta | nee_only, 1.0, mis_weight(em_pdf_nee, material_pdf))
             direct = dr.select(do_nee, path.beta * bsdf_value * em_weight * mis_em, 0.0)
             path.L += direct
-            weight_direct = _luminance(y_weights, direct)
-            # Direct light at the first non-specular vertex carries the emitter's own Σ⊥; later, the
-            # first vertex's resolved record.
-            sums.add(dr.select(do_nee & ~first_vertex.seen, weight_direct, 0.0), direct_sample)
-            counts_indirect = do_nee & first_vertex.seen & first_vertex.indirect_ready
-            sums.add(dr.select(counts_indirect, weight_direct, 0.0), first_vertex.indirect)
+            # Diagnostics of this bounce's light: direct light at the first non-specular vertex carries
+            # the emitter's own Σ⊥; emission reached by material sampling and later direct light, the
+            # first vertex's resolved record. A lane has at most one of the two (an emitter's surface
+            # does no NEE), so one sum of their luminance counts either: the same float sums as one
+            # ``add`` each (the other adds zero), for a third of the arithmetic.
+            direct_first = do_nee & ~first_vertex.seen
+            counts = direct_first | (first_vertex.indirect_ready & first_vertex.seen)
+            sums.add(
+                dr.select(counts, _luminance(y_weights, emitted + direct), 0.0),
+                dr.select(direct_first, direct_sample, first_vertex.indirect),
+            )
 
             # ---------------------- Update the path; start or carry the pending record -----------
             # Path-level hero MIS: β_j = t_j/mean_k r_k (t_j = Π f_j/Π p_hero) advances by f_j/p_eff with
             # p_eff = mean_k ρ_k p_k(v) = p_ref·mean_k ρ_k q_k, and ρ_k by p_k/p_eff (normalised again).
-            ratio_step = mean_over_wavelengths(path.hero_ratio * bs.pdf_ratios)
             sampled_pdf = mean_over_wavelengths(
                 path.hero_ratio * bs.pdf
             )  # before ρ is advanced: MIS of the next hit
-            advance = continue_path & (ratio_step > 0.0)
-            path.beta = dr.select(advance, path.beta * bs.weight / dr.maximum(ratio_step, 1e-30), 0.0)
-            path.hero_ratio = dr.select(
-                advance, path.hero_ratio * bs.pdf_ratios / dr.maximum(ratio_step, 1e-30), path.hero_ratio
-            )
+            self._advance_throughput(path, bs, continue_path)
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             self._start_or_carry(
                 vertex, bs, wo_world, continue_path, film_passthrough, wavelengths, record, film, first_vertex
             )
 
-            path.prev_si = si
+            path.prev_si = mi.Interaction3f(si)
             path.prev_pdf = sampled_pdf
             path.prev_delta = bs.delta
             # Emission a NEE-only lobe reaches was counted by next-event estimation already.

@@ -140,11 +140,12 @@ class MaterialKernels:
         """The next path segment (``common.MaterialSample``); ``film`` holds the thin films' terms (zero
         elsewhere) — the weight uses their incoherent part, the integrator rescales it once the incident
         coherence is known. ``pdf_ratios``: q_k of the hero-wavelength MIS (``common``), 1 where the kind's
-        sampling does not depend on the hero."""
+        sampling does not depend on the hero; ``None`` when no kind of the scene's does (the integrator
+        then skips the ratios' arithmetic, decided when the kernel is traced)."""
         kind = self.kind(material)
         point = ShadingPoint(material, wi, wavelengths)
         wo, weight, pdf = mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Spectrum(0.0)
-        ratios = mi.Spectrum(1.0)
+        ratios = None
         delta, eta = mi.Bool(False), mi.Float(1.0)
         terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
         transmitted = mi.Bool(False)
@@ -157,7 +158,8 @@ class MaterialKernels:
             delta = dr.select(is_this, sampled.delta, delta)
             eta = dr.select(is_this, sampled.eta, eta)
             if sampled.pdf_ratios is not None:
-                ratios = dr.select(is_this, sampled.pdf_ratios, ratios)
+                otherwise = mi.Spectrum(1.0) if ratios is None else ratios
+                ratios = dr.select(is_this, sampled.pdf_ratios, otherwise)
             if sampled.film is not None:
                 transmitted = dr.select(is_this, sampled.film.transmitted, transmitted)
                 for slot, term in enumerate(sampled.film.terms):
