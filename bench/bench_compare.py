@@ -87,11 +87,9 @@ def main(baseline_tree: Path, rounds: int) -> dict[str, Any]:
         "note": "shared machine: compare ratios with the spread between rounds",
         "scenes": results,
     }
-    out = ROOT / "bench" / "results" / "integrator_compare.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    temporary = out.with_suffix(".json.tmp")
-    temporary.write_text(json.dumps(report, indent=2))
-    os.replace(temporary, out)
+    from bench.machine import write_results  # here: probes run this script with another tree's path
+
+    write_results("integrator_compare", report)
     return report
 
 

@@ -117,7 +117,7 @@ def _medians(records: list[dict[str, float]]) -> dict[str, float]:
 
 def main(trees: dict[str, Path], rounds: int, scenes: list[str]) -> dict[str, Any]:
     """``trees``: name → checkout; the first is this tree (which also times Mitsuba's integrators)."""
-    from bench.machine import MachineLoad
+    from bench.machine import MachineLoad, write_results
 
     load = MachineLoad()
     names = list(trees)
@@ -169,11 +169,7 @@ def main(trees: dict[str, Path], rounds: int, scenes: list[str]) -> dict[str, An
         **load.fields(),
         "scenes": results,
     }
-    out = ROOT / "bench" / "results" / "kernel_profile.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    temporary = out.with_suffix(".json.tmp")
-    temporary.write_text(json.dumps(report, indent=2))
-    os.replace(temporary, out)
+    write_results("kernel_profile", report)
     return report
 
 
