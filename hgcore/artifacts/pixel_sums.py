@@ -105,10 +105,11 @@ class PixelSums:
             {key: f32(value) for key, value in self.values.items()},
         )
 
-    def table(self) -> np.ndarray:
-        """The sums as one float32 (rows, W, C) array in the partial's column order."""
+    def table(self, dtype: type[np.floating] = np.float32) -> np.ndarray:
+        """The sums as one (rows, W, C) array in the partial's column order (float32: what a partial
+        stores; float64: what ``RunningSums`` keeps)."""
         columns = [self.bands, self.bands_sq, *(self.values[key][..., None] for key in SUM_KEYS)]
-        return np.concatenate(columns, axis=-1).astype(np.float32)
+        return np.concatenate(columns, axis=-1).astype(dtype, copy=False)
 
     @classmethod
     def from_table(cls, sample_count: int, band_count: int, table: np.ndarray) -> PixelSums:

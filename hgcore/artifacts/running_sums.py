@@ -55,9 +55,7 @@ class RunningSums:
             running.sample_count += sums.sample_count
         else:
             running = sums
-            table = np.concatenate(
-                [sums.bands, sums.bands_sq, *(sums.values[key][..., None] for key in SUM_KEYS)], axis=-1
-            )
+            table = sums.table(np.float64)
         os.pwrite(self._file.fileno(), memoryview(table).cast("B"), y0 * self._row_bytes)  # no copy
         return running
 
