@@ -55,6 +55,7 @@ from worker.render.bsdfs import (
     MaterialKernels,
     MaterialParams,
     MaterialSample,
+    VertexSpectra,
     VisibilityModel,
     film_reflectance,
 )
@@ -258,6 +259,7 @@ class Vertex(NamedTuple):
     si: mi.SurfaceInteraction3f
     material: mi.UInt32
     kind: mi.UInt32
+    spectra: VertexSpectra  # the material's spectra at the path's wavelengths, looked up once per bounce
     frame: mi.Frame3f  # shading frame, flipped towards the incident side where two-sided
     hit_emitter: mi.Bool
     specular: mi.Bool
@@ -537,10 +539,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # index is the substrate's, else the exterior's (hero wavelength).
             incident_ior = dr.select(
                 sampled.wo.z < 0.0,
-                self.kernels.params.spectrum(vertex.material, mat.ETA_ID, wavelengths)[0],
+                vertex.spectra[mat.ETA_ID][0],
                 self.kernels.param(vertex.material, mat.EXTERIOR_IOR),
             )
-            film_ior = self.kernels.params.spectrum(vertex.material, mat.FILM_IOR_ID, wavelengths)[0]
+            film_ior = vertex.spectra[mat.FILM_IOR_ID][0]
             shear = film_shear(vertex.frame.n, -wo_world, thickness, film_ior, incident_ior, OPS)
             film.separation = dr.select(is_film, mi.Vector3f(*shear), film.separation)
             film.material = dr.select(is_film, vertex.material, film.material)
@@ -677,6 +679,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 mi.UInt32, self.context.shape_material, dr.reinterpret_array(mi.UInt32, si.shape), valid
             )
             kind = kernels.kind(material)
+            # Before the bounce's symbolic branches, so that sampling, NEE and the pending record share
+            # them (``VertexSpectra``).
+            spectra = kernels.vertex_spectra(material, wavelengths)
             emitter_ptr = si.emitter(scene, valid)
             hit_emitter = valid & (emitter_ptr != None)  # noqa: E711 - Dr.Jit pointer comparison
             specular = valid & kernels.is_specular(material) & ~hit_emitter
@@ -699,7 +704,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             wi = frame.to_local(wi_world)
             continue_path = nonspecular | specular
             continue_path &= path.depth + 1 < self.max_depth
-            vertex = Vertex(si, material, kind, frame, hit_emitter, specular, nonspecular)
+            vertex = Vertex(si, material, kind, spectra, frame, hit_emitter, specular, nonspecular)
 
             # ---------------------- Material sampling (random numbers: NEE, then material) -------
             nee_sample = sampler.next_2d(continue_path & nonspecular)
@@ -710,6 +715,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 sampler.next_1d(continue_path),
                 sampler.next_2d(continue_path),
                 continue_path,
+                spectra,
             )
             wo_world = frame.to_world(bs.wo)
             # A film on glass reflecting or refracting specularly keeps a pending record's coherence, like
@@ -778,7 +784,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             if has_nee_only:
                 wo_eval = dr.select(nee_only, wo_centre, wo_em)
             bsdf_value, bsdf_pdf = kernels.eval_pdf(
-                material, wi, wo_eval, wavelengths, nee_coherence, frame, do_nee, wo_phase=wo_centre
+                material, wi, wo_eval, wavelengths, nee_coherence, frame, do_nee, wo_centre, spectra
             )
             # Hero MIS: the material strategy's density is mean_k ρ_k p_k, the light's mean_k ρ_k p_L = p_L.
             material_pdf = mean_over_wavelengths(path.hero_ratio * bsdf_pdf)

@@ -8,7 +8,13 @@ the "specular part with probability p, else the lobe" skeleton they share. ``dis
 gather parameters, choose lobes and combine the four wavelengths (conventions: ``common``).
 """
 
-from worker.render.bsdfs.common import IncidentCoherence, MaterialParams, MaterialSample, VisibilityModel
+from worker.render.bsdfs.common import (
+    IncidentCoherence,
+    MaterialParams,
+    MaterialSample,
+    VertexSpectra,
+    VisibilityModel,
+)
 from worker.render.bsdfs.dispatch import MaterialKernels
 from worker.render.bsdfs.thin_film import film_reflectance
 
@@ -17,6 +23,7 @@ __all__ = [
     "MaterialKernels",
     "MaterialParams",
     "MaterialSample",
+    "VertexSpectra",
     "VisibilityModel",
     "film_reflectance",
 ]

@@ -20,6 +20,7 @@ Coherence enters only through ``IncidentCoherence`` (Σ⊥, r and frame of the l
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple
 
@@ -136,18 +137,23 @@ class MaterialParams:
         spectrum_id = mi.UInt32(self.param(material, offset))
         return lookup(mi, self.spectra, spectrum_id, wavelengths)
 
+    def vertex_spectra(
+        self, material: mi.UInt32, wavelengths: mi.Spectrum, offsets: Iterable[int] = ()
+    ) -> VertexSpectra:
+        """The spectra of ``material`` at ``wavelengths``, the ``offsets`` among them looked up now."""
+        return VertexSpectra(self, material, wavelengths, offsets)
+
     def kind(self, material: mi.UInt32) -> mi.UInt32:
         return mi.UInt32(self.param(material, mat.KIND))
 
-    def interface_reflectance(
-        self, material: mi.UInt32, cos_theta: mi.Float | float, wavelengths: mi.Spectrum
-    ) -> mi.Spectrum:
-        """Unpolarised Fresnel reflectance F(θ) of the material's (conductor or substrate) interface."""
-        exterior = self.param(material, mat.EXTERIOR_IOR)
-        eta = self.spectrum(material, mat.ETA_ID, wavelengths) / exterior
-        kappa = self.spectrum(material, mat.KAPPA_ID, wavelengths) / exterior
+    def interface_reflectance(self, spectra: VertexSpectra, cos_theta: mi.Float | float) -> mi.Spectrum:
+        """Unpolarised Fresnel reflectance F(θ) of the (conductor or substrate) interface of the material
+        whose spectra are ``spectra``."""
+        exterior = self.param(spectra.material, mat.EXTERIOR_IOR)
+        eta = spectra[mat.ETA_ID] / exterior
+        kappa = spectra[mat.KAPPA_ID] / exterior
         result = mi.Spectrum(0.0)
-        for j in range(len(wavelengths)):
+        for j in range(len(spectra.wavelengths)):
             result[j] = fresnel_reflectance(cos_theta, ComplexPair(eta[j], kappa[j]), OPS)
         return result
 
@@ -167,14 +173,42 @@ class MaterialParams:
         return result, q
 
 
+class VertexSpectra:
+    """A material's spectra (``materials`` offsets ``*_ID``) at a path's wavelengths, ``spectra[offset]``.
+
+    Why: a bounce reads the same spectra for material sampling, next-event estimation and the pending
+    record, but Dr.Jit merges identical lookups only within one symbolic scope, and the bounce's symbolic
+    branches (resolving a record, the emitter's coherence) lie between those reads. So the integrator looks
+    the vertex's spectra up once, before the branches (``offsets``: those of the scene's material kinds,
+    ``MaterialKernels.spectrum_offsets``), and every read shares them. A spectrum not looked up then is
+    looked up at each read and never kept: a value made inside a symbolic branch must not leave it.
+    """
+
+    def __init__(
+        self, params: MaterialParams, material: mi.UInt32, wavelengths: mi.Spectrum, offsets: Iterable[int]
+    ) -> None:
+        self.params = params
+        self.material = material
+        self.wavelengths = wavelengths
+        self._looked_up = {offset: params.spectrum(material, offset, wavelengths) for offset in offsets}
+
+    def __getitem__(self, offset: int) -> mi.Spectrum:
+        value = self._looked_up.get(offset)
+        if value is None:
+            return self.params.spectrum(self.material, offset, self.wavelengths)
+        return value
+
+
 class ShadingPoint(NamedTuple):
     """A vertex as a material sees it (the part of Mitsuba's SurfaceInteraction a BSDF reads): the
     material index, ``wi`` (local frame, towards the previous vertex), the path's wavelengths (nm), the
-    world-space shading frame (gratings' axes, a film's normal; sampling does not need it)."""
+    material's spectra at them, the world-space shading frame (gratings' axes, a film's normal; sampling
+    does not need it)."""
 
     material: mi.UInt32
     wi: mi.Vector3f
     wavelengths: mi.Spectrum
+    spectra: VertexSpectra
     frame: mi.Frame3f | None = None
 
 
@@ -190,6 +224,8 @@ class Material:
 
     kind: ClassVar[mat.MaterialKind]
     per_material: ClassVar[bool] = False
+    #: the spectra (``materials`` offsets) the kind's sampling and evaluation read (``VertexSpectra``)
+    spectra: ClassVar[tuple[int, ...]] = ()
 
     def __init__(self, params: MaterialParams, index: int | None = None) -> None:
         self.params = params

@@ -18,13 +18,14 @@ from worker.render.bsdfs.common import OPS, Material, MaterialSample, ShadingPoi
 
 class Dielectric(Material):
     kind = mat.MaterialKind.DIELECTRIC
+    spectra = (mat.ETA_ID,)
 
     def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
         return active  # both sides: the interface transmits
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         params, material, wi, wavelengths = self.params, point.material, point.wi, point.wavelengths
-        eta = params.spectrum(material, mat.ETA_ID, wavelengths) / params.param(material, mat.EXTERIOR_IOR)
+        eta = point.spectra[mat.ETA_ID] / params.param(material, mat.EXTERIOR_IOR)
         # η_ti = n_transmitted / n_incident seen from the camera side (inside: the inverse), per wavelength.
         eta_ti = dr.select(wi.z >= 0, eta, dr.rcp(eta))
         reflectance = mi.Spectrum(0.0)

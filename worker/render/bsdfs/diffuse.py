@@ -12,9 +12,10 @@ from worker.render.bsdfs.common import IncidentCoherence, Material, MaterialSamp
 
 class Diffuse(Material):
     kind = mat.MaterialKind.DIFFUSE
+    spectra = (mat.REFLECTANCE_ID,)
 
     def _reflectance(self, point: ShadingPoint) -> mi.Spectrum:
-        return self.params.spectrum(point.material, mat.REFLECTANCE_ID, point.wavelengths)
+        return point.spectra[mat.REFLECTANCE_ID]
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         direction = mi.warp.square_to_cosine_hemisphere(sample2)

@@ -19,6 +19,7 @@ from worker.render.bsdfs.common import (
     MaterialParams,
     MaterialSample,
     ShadingPoint,
+    VertexSpectra,
 )
 from worker.render.bsdfs.dielectric import Dielectric
 from worker.render.bsdfs.diffuse import Diffuse
@@ -45,12 +46,16 @@ class MaterialKernels:
         self.max_beams = params.max_beams
         self.visibility = params.visibility
         self.branches: list[Material] = []
+        offsets: set[int] = set()
         for kind in sorted(self.kinds & MATERIAL_CLASSES.keys()):
             cls = MATERIAL_CLASSES[kind]
+            offsets.update(cls.spectra)
             if cls.per_material:
                 self.branches += [cls(self.params, index) for index in materials.indices_of(kind)]
             else:
                 self.branches.append(cls(self.params))
+        #: the spectra the scene's kinds read at a vertex (``vertex_spectra``)
+        self.spectrum_offsets = tuple(sorted(offsets))
 
     # ---------------------------------------------------------------- parameters and kinds
     def param(self, material: mi.UInt32, offset: int) -> mi.Float:
@@ -84,17 +89,25 @@ class MaterialKernels:
             transmits |= film & (self.param(material, mat.FILM_TRANSMITS) > 0.5)
         return ~transmits
 
+    def vertex_spectra(self, material: mi.UInt32, wavelengths: mi.Spectrum) -> VertexSpectra:
+        """The spectra of a vertex's ``material`` that the scene's kinds read, looked up once for the
+        bounce (``common.VertexSpectra``)."""
+        return self.params.vertex_spectra(material, wavelengths, self.spectrum_offsets)
+
     def albedo(self, material: mi.UInt32, wavelengths: mi.Spectrum) -> mi.Spectrum:
         """Directional-hemispherical reflectance at normal incidence, for the albedo AOV."""
         kind = self.kind(material)
+        spectra = self.params.vertex_spectra(material, wavelengths)
         diffuse = self.is_kind(kind, frozenset({mat.MaterialKind.DIFFUSE}))
+        value = dr.select(diffuse, spectra[mat.REFLECTANCE_ID], 0.0)
+        if not self.kinds - {mat.MaterialKind.DIFFUSE, mat.MaterialKind.BLACK}:
+            return value  # no interface to reflect (the Fresnel term would be selected away in every lane)
         reflective = ~diffuse & ~self.is_kind(kind, frozenset({mat.MaterialKind.BLACK}))
-        value = dr.select(diffuse, self.params.spectrum(material, mat.REFLECTANCE_ID, wavelengths), 0.0)
-        return dr.select(reflective, self.params.interface_reflectance(material, 1.0, wavelengths), value)
+        return dr.select(reflective, self.params.interface_reflectance(spectra, 1.0), value)
 
     def film_terms(self, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum) -> list[mi.Spectrum]:
         """A thin film's terms [R_incoherent, X_1 …] at incidence cos_i (``thin_film.film_terms``)."""
-        return film_terms(self.params, material, cos_i, wavelengths)
+        return film_terms(self.params.vertex_spectra(material, wavelengths), cos_i)
 
     # ---------------------------------------------------------------- evaluation and sampling
     def eval_pdf(
@@ -107,15 +120,19 @@ class MaterialKernels:
         frame: mi.Frame3f,
         active: mi.Bool,
         wo_phase: mi.Vector3f | None = None,
+        spectra: VertexSpectra | None = None,
     ) -> tuple[mi.Spectrum, mi.Spectrum]:
         """(f·|cos θo|, MIS density p_k) per wavelength of the non-Dirac part for light arriving along ``wo``.
 
         ``frame``: the shading frame (world space); ``wo_phase`` (default ``wo``): the direction whose
         interference phase a thin film uses — for light from an emitter the direction to its centre (BRIEF:
-        sampled emitter points serve radiometry only).
+        sampled emitter points serve radiometry only); ``spectra``: the vertex's (``vertex_spectra``; None:
+        looked up here).
         """
         kind = self.kind(material)
-        point = ShadingPoint(material, wi, wavelengths, frame)
+        if spectra is None:
+            spectra = self.vertex_spectra(material, wavelengths)
+        point = ShadingPoint(material, wi, wavelengths, spectra, frame)
         phase = wo if wo_phase is None else wo_phase
         value = mi.Spectrum(0.0)
         pdf = mi.Spectrum(0.0)
@@ -136,14 +153,18 @@ class MaterialKernels:
         sample1: mi.Float,
         sample2: mi.Point2f,
         active: mi.Bool,
+        spectra: VertexSpectra | None = None,
     ) -> MaterialSample:
         """The next path segment (``common.MaterialSample``); ``film`` holds the thin films' terms (zero
         elsewhere) — the weight uses their incoherent part, the integrator rescales it once the incident
         coherence is known. ``pdf_ratios``: q_k of the hero-wavelength MIS (``common``), 1 where the kind's
         sampling does not depend on the hero; ``None`` when no kind of the scene's does (the integrator
-        then skips the ratios' arithmetic, decided when the kernel is traced)."""
+        then skips the ratios' arithmetic, decided when the kernel is traced). ``spectra``: the vertex's
+        (``vertex_spectra``; None: looked up here)."""
         kind = self.kind(material)
-        point = ShadingPoint(material, wi, wavelengths)
+        if spectra is None:
+            spectra = self.vertex_spectra(material, wavelengths)
+        point = ShadingPoint(material, wi, wavelengths, spectra)
         wo, weight, pdf = mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Spectrum(0.0)
         ratios = None
         delta, eta = mi.Bool(False), mi.Float(1.0)

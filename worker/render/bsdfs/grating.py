@@ -20,6 +20,7 @@ from worker.render.bsdfs.lobes import specular_or_lobe, split_specular
 class Grating(Material):
     kind = mat.MaterialKind.GRATING
     per_material = True
+    spectra = (mat.ETA_ID, mat.KAPPA_ID)
     model: grating_model.BinaryGrating
 
     def _rotation(self, material: mi.UInt32) -> tuple[mi.Float, mi.Float]:
@@ -57,7 +58,7 @@ class Grating(Material):
         light = vec(self._to_grating(material, wo))
         view = vec(self._to_grating(material, wi))
         angular_cov = self._angular_covariance(material, coherence, point.frame)
-        fresnel = self.params.interface_reflectance(material, wo.z, wavelengths)
+        fresnel = self.params.interface_reflectance(point.spectra, wo.z)
         value = mi.Spectrum(0.0)
         pdfs = mi.Spectrum(0.0)
         for j in range(len(wavelengths)):
@@ -87,7 +88,7 @@ class Grating(Material):
         )
         lobe_wo = self._from_grating(material, mi.Vector3f(*lobe_dir))
         wo = dr.select(choose_specular, mi.reflect(wi), lobe_wo)
-        fresnel = self.params.interface_reflectance(material, wo.z, wavelengths)
+        fresnel = self.params.interface_reflectance(point.spectra, wo.z)
         lobe_value = mi.Spectrum(0.0)
         # Hero k picks a lobe with 1 − η_00(λ_k) and draws it with its own density: p_k relative to the
         # hero's selection probability, which ``specular_or_lobe`` divides by.

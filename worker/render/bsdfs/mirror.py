@@ -10,8 +10,9 @@ from worker.render.bsdfs.common import Material, MaterialSample, ShadingPoint
 
 class Mirror(Material):
     kind = mat.MaterialKind.MIRROR
+    spectra = (mat.ETA_ID, mat.KAPPA_ID)
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         wi = point.wi
-        reflectance = self.params.interface_reflectance(point.material, wi.z, point.wavelengths)
+        reflectance = self.params.interface_reflectance(point.spectra, wi.z)
         return MaterialSample(mi.reflect(wi), reflectance, mi.Spectrum(1.0), mi.Bool(True), mi.Float(1.0))

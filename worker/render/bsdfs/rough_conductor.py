@@ -20,13 +20,14 @@ from worker.render.bsdfs.lobes import mean_over_wavelengths, specular_or_lobe, s
 class RoughConductor(Material):
     kind = mat.MaterialKind.ROUGH_CONDUCTOR
     per_material = True
+    spectra = (mat.ETA_ID, mat.KAPPA_ID)
     model: rough_surface.RoughSurface
     _fraction_table: mi.Float | None = None  # built on first use (``_reflection_fraction``)
 
     def reflectance(self, point: ShadingPoint, wo: mi.Vector3f) -> list[mi.Spectrum]:
         """The interface's reflectance terms for light arriving along ``wo``: [F(θ_i)] for a conductor (the
         first term is the incoherent reflectance that scales both parts)."""
-        return [self.params.interface_reflectance(point.material, point.wi.z, point.wavelengths)]
+        return [self.params.interface_reflectance(point.spectra, point.wi.z)]
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         sampled, _ = self.sample_reflection(point, sample1, sample2)

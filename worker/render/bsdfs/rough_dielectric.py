@@ -22,6 +22,7 @@ from worker.render.bsdfs.lobes import mean_over_wavelengths, specular_or_lobe, s
 class RoughDielectric(Material):
     kind = mat.MaterialKind.ROUGH_DIELECTRIC
     per_material = True
+    spectra = (mat.ETA_ID,)
     model: rough_surface.RoughSurface
 
     def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
@@ -33,9 +34,7 @@ class RoughDielectric(Material):
     def _camera_side(self, point: ShadingPoint) -> tuple[mi.Bool, mi.Spectrum, mi.Spectrum]:
         """(outside, n_camera, n_other) per wavelength: relative indices of the camera's and the far side."""
         params, material = self.params, point.material
-        eta = params.spectrum(material, mat.ETA_ID, point.wavelengths) / params.param(
-            material, mat.EXTERIOR_IOR
-        )
+        eta = point.spectra[mat.ETA_ID] / params.param(material, mat.EXTERIOR_IOR)
         outside = point.wi.z > 0
         return outside, dr.select(outside, 1.0, eta), dr.select(outside, eta, 1.0)
 

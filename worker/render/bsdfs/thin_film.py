@@ -31,27 +31,27 @@ from worker.render.bsdfs.common import (
     OPS,
     FilmSample,
     IncidentCoherence,
-    MaterialParams,
     MaterialSample,
     ShadingPoint,
+    VertexSpectra,
     VisibilityModel,
     refract,
 )
 from worker.render.bsdfs.rough_conductor import RoughConductor
 
 
-def film_terms(
-    params: MaterialParams, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum
-) -> list[mi.Spectrum]:
-    """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i, with every
-    beam (``hgcore.optics.thin_film.film_reflectance_terms``). The film's index is n_f + iκ_f where a film
-    of the scene absorbs (``MaterialParams.film_absorbing``), else the real n_f as before."""
+def film_terms(spectra: VertexSpectra, cos_i: mi.Float) -> list[mi.Spectrum]:
+    """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i of the film
+    whose spectra are ``spectra``, with every beam (``hgcore.optics.thin_film.film_reflectance_terms``). The
+    film's index is n_f + iκ_f where a film of the scene absorbs (``MaterialParams.film_absorbing``), else
+    the real n_f as before."""
+    params, material, wavelengths = spectra.params, spectra.material, spectra.wavelengths
     exterior = params.param(material, mat.EXTERIOR_IOR)
     thickness_m = params.param(material, mat.FILM_THICKNESS_M)
-    film_n = params.spectrum(material, mat.FILM_IOR_ID, wavelengths)
+    film_n = spectra[mat.FILM_IOR_ID]
     film_kappa = params.param(material, mat.FILM_EXTINCTION) if params.film_absorbing else None
-    substrate_n = params.spectrum(material, mat.ETA_ID, wavelengths)
-    substrate_k = params.spectrum(material, mat.KAPPA_ID, wavelengths)
+    substrate_n = spectra[mat.ETA_ID]
+    substrate_k = spectra[mat.KAPPA_ID]
     terms = [mi.Spectrum(0.0) for _ in range(params.max_beams)]
     for j in range(len(wavelengths)):
         # every beam, the separations d ≥ P − 1 together (hgcore.optics.thin_film: "All beams")
@@ -89,6 +89,7 @@ def film_reflectance(
 class ThinFilm(RoughConductor):
     kind = mat.MaterialKind.THIN_FILM
     per_material = True
+    spectra = (mat.ETA_ID, mat.KAPPA_ID, mat.FILM_IOR_ID)
 
     @property
     def transmits(self) -> bool:
@@ -97,7 +98,7 @@ class ThinFilm(RoughConductor):
 
     def reflectance(self, point: ShadingPoint, wo: mi.Vector3f) -> list[mi.Spectrum]:
         """The film's terms at the sampled direction (R_incoherent first)."""
-        return film_terms(self.params, point.material, wo.z, point.wavelengths)
+        return film_terms(point.spectra, wo.z)
 
     def sample_domain(self, wi: mi.Vector3f, active: mi.Bool) -> mi.Bool:
         return active & (wi.z != 0) if self.transmits else active & (wi.z > 0)
@@ -111,11 +112,11 @@ class ThinFilm(RoughConductor):
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Spectrum]:
-        terms = film_terms(self.params, point.material, wo_phase.z, point.wavelengths)
+        terms = film_terms(point.spectra, wo_phase.z)
         # Direct light reaches the film from the exterior side (``eval_domain``): the shear of light
         # arriving along −wo_phase with the exterior's index (``hgcore.optics.thin_film.film_shear``).
         thickness_m = self.params.param(point.material, mat.FILM_THICKNESS_M)
-        film_ior = self.params.spectrum(point.material, mat.FILM_IOR_ID, point.wavelengths)[0]
+        film_ior = point.spectra[mat.FILM_IOR_ID][0]
         exterior = self.params.param(point.material, mat.EXTERIOR_IOR)
         light_world = point.frame.to_world(wo_phase)
         separation = mi.Vector3f(
@@ -139,16 +140,16 @@ class ThinFilm(RoughConductor):
         stack has the same R from both sides (exact in the coherent and incoherent limits), so the
         exterior-side terms serve both. The film's roughness scatters reflected light only.
         """
-        params, material, wi, wavelengths = self.params, point.material, point.wi, point.wavelengths
+        params, material, wi = self.params, point.material, point.wi
         exterior = params.param(material, mat.EXTERIOR_IOR)
-        eta = params.spectrum(material, mat.ETA_ID, wavelengths)[0] / exterior
+        eta = point.spectra[mat.ETA_ID][0] / exterior
         outside = wi.z > 0
         eta_ti = dr.select(outside, eta, dr.rcp(eta))  # n_transmitted / n_incident (hero)
         _, cos_t = fresnel_dielectric(wi.z, eta_ti, OPS)
         cos_i = dr.abs(wi.z)
         total_internal = ~outside & (dr.square(eta_ti) < 1.0 - dr.square(cos_i))
         cos_exterior = dr.select(outside, cos_i, cos_t)
-        terms = film_terms(params, material, cos_exterior, wavelengths)
+        terms = film_terms(point.spectra, cos_exterior)
         reflectance = dr.select(total_internal, 1.0, terms[0])
         reflect_probability = reflectance[0]
         reflect = sample1 < reflect_probability
