@@ -125,7 +125,9 @@ class PixelSums:
 
     @classmethod
     def concatenate(cls, parts: list[PixelSums]) -> PixelSums:
-        """Row bands (top to bottom, equal ``sample_count``) stacked into one image."""
+        """Row bands (top to bottom, equal ``sample_count``) stacked into one image (one band: itself)."""
+        if len(parts) == 1:
+            return parts[0]
         return cls(
             parts[0].sample_count,
             np.concatenate([part.bands for part in parts]),

@@ -1,11 +1,13 @@
 """Runs ``hg_path`` over the image and reduces samples into per-pixel sums (deterministically).
 
 The image renders in tiles (row bands of ``tile_rows`` rows, ~``TILE_PIXELS`` pixels), so a render holds
-one tile's sums, not the image's. Within a tile, samples are laid out pixel-major (wavefront index =
-pixel·spp + s) and reduced with ``dr.block_sum``, so sums do not depend on thread scheduling: the same
-scene, spp and seed give bitwise-identical output, which scatter-based (atomic) film accumulation would
-not. Passes bound the wavefront size (``MAX_WAVEFRONT``); sums are accumulated in float64 on the host, one
-array per column. A chunk is a set of passes with its own seed per tile; chunks merge by adding sums.
+one tile's sums, not the image's. Within a tile, each lane traces ``samples_per_lane`` samples of one
+pixel one after another and sums their outputs in registers; a pixel's lanes are adjacent (wavefront
+index = pixel·lanes + lane) and reduce with ``dr.block_sum``. Sums therefore do not depend on thread
+scheduling: the same scene, spp and seed give bitwise-identical output, which scatter-based (atomic) film
+accumulation would not. Passes bound the samples per pass (``MAX_WAVEFRONT``); sums are accumulated in
+float64 on the host in one (pixels, columns) table. A chunk is a set of passes with its own seed per tile;
+chunks merge by adding sums.
 
 Kernel compilation: Dr.Jit caches compiled kernels by the hash of their IR (in memory and on disk under
 ``~/.drjit``), so a second render of a scene with the same structure and constants skips compilation.
@@ -28,7 +30,13 @@ from worker.render.rlt import integrator_class
 from worker.render.scene_compiler import CompiledScene
 from worker.render.wavelength_sampling import WavelengthSampler, lane_weights, scene_density
 
-MAX_WAVEFRONT = 1 << 20  # samples per pass: ~60 float32 outputs each stay in memory until reduced
+MAX_WAVEFRONT = 1 << 20  # samples per pass (their lanes' ~60 float32 sums stay in memory until reduced)
+SAMPLES_PER_LANE = 16
+"""Samples a lane traces in sequence (``samples_per_lane``). Summing them in the megakernel's registers
+stores and reduces 1/16 of the per-sample outputs (60 float32 columns: 18 of the 330 ms of a 128² × 64 spp
+Cornell box went to storing and block-summing them per sample); a pixel's 16-lane packets still trace
+that pixel's samples (its camera rays stay coherent), which a loop over all of a pixel's samples in one
+lane would give up (+3 % megakernel time, measured)."""
 TILE_PIXELS = 1 << 18
 """Pixels per tile (row band), at least one row. A tile's float64 sums (2B + 28 columns: 188 MiB at 32
 bands) are all the per-pixel state a render holds; 4 spp per pass at 1 M samples keeps passes full."""
@@ -52,6 +60,15 @@ def tile_seed(chunk_seed: int, tile_index: int) -> int:
     if tile_index == 0:
         return chunk_seed
     return (chunk_seed * 0x2C1B3C6D + tile_index * 0x297A2D39 + 0x7ED55D16) & 0xFFFFFFFF
+
+
+def samples_per_lane(spp: int) -> int:
+    """Samples each lane of a pass of ``spp`` samples per pixel traces: the largest power of two that
+    divides ``spp``, at most ``SAMPLES_PER_LANE``, so every lane of a pixel traces as many."""
+    count = 1
+    while count < SAMPLES_PER_LANE and spp % (2 * count) == 0:
+        count *= 2
+    return count
 
 
 def pass_seed(chunk_seed: int, pass_index: int) -> int:
@@ -174,11 +191,9 @@ class Renderer:
         pixels = (y1 - y0) * self.width
         spp_per_pass = max(1, min(spp, MAX_WAVEFRONT // max(pixels, 1)))
         seed = tile_seed(seed, tile_index)
-        # One float64 running total per column: adding per-pass columns on the host costs one pass over
-        # the tile's pixels per column, where an interleaved table cost one scatter kernel per column and
-        # pass (64 % of a 1024² render's wall time). The sums are the same float64 additions, in the same
-        # order, so they are bitwise those of the interleaved table.
-        totals: list[np.ndarray] | None = None
+        # One float64 (pixels, columns) running total on the host: a pass adds its columns in one NumPy
+        # operation, where a scatter kernel per column and pass cost 64 % of a 1024² render's wall time.
+        totals: np.ndarray | None = None
         done = 0
         pass_index = 0
         while done < spp:
@@ -193,39 +208,69 @@ class Renderer:
             # and a job shows that it renders as soon as its first pass starts, not a pass later.
             if progress is not None:
                 progress(done / spp)
-            columns = [np.asarray(column) for column in launched]
+            columns = np.stack([np.asarray(column) for column in launched], axis=-1)
             if totals is None:
-                totals = [column.astype(np.float64) for column in columns]
+                totals = columns.astype(np.float64)
             else:
-                for total, column in zip(totals, columns, strict=True):
-                    total += column
+                totals += columns
         assert totals is not None
-        band_count = self.compiled.bands.band_count
-        shape = (y1 - y0, self.width)
-        return PixelSums(
-            sample_count=spp,
-            bands=np.stack(totals[:band_count], axis=-1).reshape(*shape, band_count),
-            bands_sq=np.stack(totals[band_count : 2 * band_count], axis=-1).reshape(*shape, band_count),
-            values={key: totals[2 * band_count + i].reshape(shape) for i, key in enumerate(SUM_KEYS)},
-        )
+        table = totals.reshape(y1 - y0, self.width, totals.shape[-1])
+        return PixelSums.from_table(spp, self.compiled.bands.band_count, table)
 
     def _render_pass(self, y0: int, y1: int, spp: int, seed: int) -> list[Any]:
         """Launch one pass over rows [y0, y1): per-pixel float32 sums of ``spp`` samples, one Dr.Jit
         array per column (bands, bands², then ``SUM_KEYS``), being evaluated asynchronously."""
         mi = self.mi
-        bands = self.compiled.bands
-        width, height = self.width, self.height
-        wavefront = width * (y1 - y0) * spp
+        width = self.width
+        lane_samples = samples_per_lane(spp)
+        lanes_per_pixel = spp // lane_samples
+        wavefront = width * (y1 - y0) * lanes_per_pixel
         index = dr.arange(mi.UInt32, wavefront)
         # Opaque: as a literal the tile's first pixel would be part of the kernel's IR, and every tile
         # would compile its own copy of the path megakernel. The pass's spp and the image size stay
         # literals: divisions by them compile to multiply-shift sequences, while opaque divisors made the
         # megakernel ~5 % slower (bench_compare, Cornell 128²); a new spp per pass compiles once (~0.3 s).
-        pixel = index // spp + dr.opaque(mi.UInt32, y0 * width)
+        pixel = index // lanes_per_pixel + dr.opaque(mi.UInt32, y0 * width)
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, wavefront)
         pixel_x = mi.Float(pixel % width)
         pixel_y = mi.Float(pixel // width)
+        sums = self._lane_sums(sampler, pixel_x, pixel_y, lane_samples)
+        # One launch of the path megakernel for every column (reducing them one by one would re-run the
+        # whole path loop for each), then one reduction launch for all of them.
+        dr.eval(sums)
+        if lanes_per_pixel > 1:
+            sums = [dr.block_sum(column, lanes_per_pixel) for column in sums]
+            dr.eval(sums)
+        return sums
+
+    def _lane_sums(self, sampler: Any, pixel_x: Any, pixel_y: Any, lane_samples: int) -> list[Any]:
+        """Each lane's sums of ``lane_samples`` samples of its pixel (``_sample_columns``), traced in a
+        symbolic loop whose state is the sums, the sample counter and the sampler.
+
+        The loop is traced with ``OptimizeLoops`` off: the flag's search for unchanging state traces a
+        loop body twice, and around the path loop (traced twice itself) that made four traces of the path
+        (+9 ms a render). All of this loop's state changes, so it had nothing to find; the path loop
+        inside keeps the optimisation."""
+        mi = self.mi
+        column_count = 2 * self.compiled.bands.band_count + len(SUM_KEYS)
+        state = (mi.UInt32(0), [mi.Float(0.0) for _ in range(column_count)], sampler)
+
+        def body(count: Any, sums: list[Any], sampler: Any) -> tuple[Any, list[Any], Any]:
+            with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, True):
+                values = self._sample_columns(sampler, pixel_x, pixel_y)
+            return count + 1, [total + value for total, value in zip(sums, values, strict=True)], sampler
+
+        with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
+            _, sums, _ = dr.while_loop(state, lambda count, *_: count < lane_samples, body, label="samples")
+        return sums
+
+    def _sample_columns(self, sampler: Any, pixel_x: Any, pixel_y: Any) -> list[Any]:
+        """One camera sample of the pixel at (``pixel_x``, ``pixel_y``): its per-sample columns (bands,
+        bands², then ``SUM_KEYS``)."""
+        mi = self.mi
+        bands = self.compiled.bands
+        width, height = self.width, self.height
         film_position = mi.Point2f(
             (pixel_x + sampler.next_1d()) / width, (pixel_y + sampler.next_1d()) / height
         )
@@ -275,14 +320,8 @@ class Renderer:
             "luminance": xyz[1],
             "luminance_sq": dr.square(xyz[1]),
         }
-        # Evaluate every per-sample output in one launch of the path megakernel: reducing them one by one
-        # would re-run the whole path loop for each output.
-        dr.eval(band_values, per_sample)
-        reduced = [dr.block_sum(v, spp) for v in band_values]
-        reduced += [dr.block_sum(dr.square(v), spp) for v in band_values]
-        reduced += [dr.block_sum(per_sample[key], spp) for key in SUM_KEYS]
-        dr.eval(reduced)  # one launch for every column's reduction
-        return reduced
+        squares = [dr.square(value) for value in band_values]
+        return band_values + squares + [per_sample[key] for key in SUM_KEYS]
 
 
 def vcz_sums(weight: Any, weighted_r: Any, direction: Any) -> dict[str, Any]:
