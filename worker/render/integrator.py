@@ -467,22 +467,15 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             self._rect_modes(em_record, record.frame_x, record.frame_y),
         )
         if self.kernels.has(mat.INTERFERENCE_KINDS):
-            # An emitter reached straight from the film: its interference phase is taken towards the
-            # emitter's centre (BRIEF), as in next-event estimation; through mirrors, along the path.
-            centre_phase = (
-                vertex.hit_emitter & ~record.chain_specular & ~film.transmitted & (not self.plane_waves)
+            # A symbolic branch: most resolved records are not a film's (the diffuse floor's), and packets
+            # without a film lane skip the visibilities of every beam.
+            path.beta = dr.if_stmt(
+                (path.beta,),
+                resolve & film.pending,
+                lambda beta: beta * self._film_factor(vertex, em_record, wavelengths, record, film, resolved),
+                lambda beta: beta,
+                label="film_factor",
             )
-            _, emitter_to_film = emitter_direction(mi, self.context.emitter_flat, em_record, film.position)
-            cos_centre = -dr.dot(emitter_to_film, film.normal)
-            centre_terms = self.kernels.film_terms(film.material, cos_centre, wavelengths)
-            phase_terms = dr.select(centre_phase, list(centre_terms), list(film.terms))
-            film_factor = film_reflectance(
-                phase_terms, self.kernels.visibility, resolved, film.separation, wavelengths
-            )
-            # The path was sampled with the incoherent part at its own direction: apply the relative
-            # interference modulation R(V)/R_incoherent of the phase direction.
-            film_factor = film_factor / dr.maximum(phase_terms[0], 1e-12)
-            path.beta = dr.select(resolve & film.pending, path.beta * film_factor, path.beta)
         record_first = resolve & record.first
         first_vertex.indirect = dr.select(
             record_first,
@@ -495,6 +488,40 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             first_vertex.indirect,
         )
         first_vertex.indirect_ready |= record_first
+
+    def _film_factor(
+        self,
+        vertex: Vertex,
+        em_record: mi.UInt32,
+        wavelengths: mi.Spectrum,
+        record: PendingRecord,
+        film: PendingFilm,
+        resolved: IncidentCoherence,
+    ) -> mi.Spectrum:
+        """R(V)/R_incoherent of a pending film whose incident light is now ``resolved``: the path was
+        sampled with the incoherent part at its own direction, so its throughput takes the relative
+        interference modulation of the phase direction.
+
+        An emitter reached straight from the film has its interference phase taken towards the emitter's
+        centre (BRIEF), as in next-event estimation (the terms there: a symbolic branch, rarely taken);
+        through mirrors, along the path."""
+        phase_terms = list(film.terms)
+        if not self.plane_waves:
+            centre_phase = vertex.hit_emitter & ~record.chain_specular & ~film.transmitted
+
+            def centre_terms(*_: mi.Spectrum) -> list[mi.Spectrum]:
+                table = self.context.emitter_flat
+                _, emitter_to_film = emitter_direction(mi, table, em_record, film.position)
+                cos_centre = -dr.dot(emitter_to_film, film.normal)
+                return list(self.kernels.film_terms(film.material, cos_centre, wavelengths))
+
+            def kept(*terms: mi.Spectrum) -> list[mi.Spectrum]:
+                return list(terms)
+
+            phase_terms = dr.if_stmt(tuple(phase_terms), centre_phase, centre_terms, kept, label="centre")
+        visibility = self.kernels.visibility
+        film_factor = film_reflectance(phase_terms, visibility, resolved, film.separation, wavelengths)
+        return film_factor / dr.maximum(phase_terms[0], 1e-12)
 
     @dr.syntax
     def _start_or_carry(

@@ -226,6 +226,8 @@ class Material:
     per_material: ClassVar[bool] = False
     #: the spectra (``materials`` offsets) the kind's sampling and evaluation read (``VertexSpectra``)
     spectra: ClassVar[tuple[int, ...]] = ()
+    #: whether ``sample`` returns ``pdf_ratios`` (its probabilities depend on the hero wavelength)
+    hero_ratios: ClassVar[bool] = True
 
     def __init__(self, params: MaterialParams, index: int | None = None) -> None:
         self.params = params
@@ -236,6 +238,12 @@ class Material:
     def record(self) -> mat.MaterialRecord:
         assert self.index is not None, "table kinds have no single record"
         return self.params.materials.records[self.index]
+
+    @property
+    def label(self) -> str:
+        """The branch's name in Dr.Jit's IR (symbolic branches)."""
+        suffix = "" if self.index is None else f"[{self.index}]"
+        return f"{self.kind.name.lower()}{suffix}"
 
     def selects(self, material: mi.UInt32, kind: mi.UInt32) -> mi.Bool:
         """Lanes whose material this branch handles."""

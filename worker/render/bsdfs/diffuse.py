@@ -12,6 +12,7 @@ from worker.render.bsdfs.common import IncidentCoherence, Material, MaterialSamp
 
 class Diffuse(Material):
     kind = mat.MaterialKind.DIFFUSE
+    hero_ratios = False
     spectra = (mat.REFLECTANCE_ID,)
 
     def _reflectance(self, point: ShadingPoint) -> mi.Spectrum:

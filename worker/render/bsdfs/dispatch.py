@@ -8,6 +8,8 @@ so a scene's kernel carries the branches it can take and no others.
 
 from __future__ import annotations
 
+from typing import Any
+
 import drjit as dr
 import mitsuba as mi
 
@@ -56,6 +58,12 @@ class MaterialKernels:
                 self.branches.append(cls(self.params))
         #: the spectra the scene's kinds read at a vertex (``vertex_spectra``)
         self.spectrum_offsets = tuple(sorted(offsets))
+        #: whether a kind of the scene samples with hero-dependent probabilities (``common.Material``)
+        self.hero_ratios = any(type(branch).hero_ratios for branch in self.branches)
+        #: the branches with a non-Dirac part to evaluate (``eval_pdf``)
+        self.evaluating = [
+            branch for branch in self.branches if type(branch).eval_pdf is not Material.eval_pdf
+        ]
 
     # ---------------------------------------------------------------- parameters and kinds
     def param(self, material: mi.UInt32, offset: int) -> mi.Float:
@@ -134,16 +142,20 @@ class MaterialKernels:
             spectra = self.vertex_spectra(material, wavelengths)
         point = ShadingPoint(material, wi, wavelengths, spectra, frame)
         phase = wo if wo_phase is None else wo_phase
-        value = mi.Spectrum(0.0)
-        pdf = mi.Spectrum(0.0)
-        for branch in self.branches:
-            evaluated = branch.eval_pdf(point, wo, coherence, phase)
-            if evaluated is None:  # a Dirac kind: nothing to evaluate
-                continue
+        evaluated = (mi.Spectrum(0.0), mi.Spectrum(0.0))
+        for branch in self.evaluating:
             is_this = branch.eval_domain(wi, wo, active) & branch.selects(material, kind)
-            value = dr.select(is_this, evaluated[0], value)
-            pdf = dr.select(is_this, evaluated[1], pdf)
-        return value, pdf
+
+            def evaluate(*_: mi.Spectrum, branch: Material = branch) -> tuple[mi.Spectrum, mi.Spectrum]:
+                return branch.eval_pdf(point, wo, coherence, phase)
+
+            if len(self.evaluating) == 1:
+                evaluated = dr.select(is_this, evaluate(), evaluated)
+            else:
+                # A symbolic branch per material: packets without a lane of this one skip its kernel
+                # (a thin film's multi-beam terms are wasted work on the diffuse floor next to it).
+                evaluated = dr.if_stmt(evaluated, is_this, evaluate, lambda *kept: kept, label=branch.label)
+        return evaluated
 
     def sample(
         self,
@@ -165,25 +177,48 @@ class MaterialKernels:
         if spectra is None:
             spectra = self.vertex_spectra(material, wavelengths)
         point = ShadingPoint(material, wi, wavelengths, spectra)
-        wo, weight, pdf = mi.Vector3f(0.0, 0.0, 1.0), mi.Spectrum(0.0), mi.Spectrum(0.0)
-        ratios = None
-        delta, eta = mi.Bool(False), mi.Float(1.0)
-        terms = [mi.Spectrum(0.0) for _ in range(self.max_beams)]
-        transmitted = mi.Bool(False)
+        # The sampled event as one flat state (what a symbolic branch takes and returns): wo, weight, pdf,
+        # delta, eta, the film's transmitted flag and terms, and q_k where a kind of the scene has them.
+        state = (
+            mi.Vector3f(0.0, 0.0, 1.0),
+            mi.Spectrum(0.0),
+            mi.Spectrum(0.0),
+            mi.Bool(False),
+            mi.Float(1.0),
+            mi.Bool(False),
+            *[mi.Spectrum(0.0) for _ in range(self.max_beams)],
+            *([mi.Spectrum(1.0)] if self.hero_ratios else []),
+        )
         for branch in self.branches:
             is_this = branch.sample_domain(wi, active) & branch.selects(material, kind)
-            sampled = branch.sample(point, sample1, sample2)
-            wo = dr.select(is_this, sampled.wo, wo)
-            weight = dr.select(is_this, sampled.weight, weight)
-            pdf = dr.select(is_this, sampled.pdf, pdf)
-            delta = dr.select(is_this, sampled.delta, delta)
-            eta = dr.select(is_this, sampled.eta, eta)
-            if sampled.pdf_ratios is not None:
-                otherwise = mi.Spectrum(1.0) if ratios is None else ratios
-                ratios = dr.select(is_this, sampled.pdf_ratios, otherwise)
-            if sampled.film is not None:
-                transmitted = dr.select(is_this, sampled.film.transmitted, transmitted)
-                for slot, term in enumerate(sampled.film.terms):
-                    terms[slot] = dr.select(is_this, term, terms[slot])
+
+            def sample_branch(*previous: Any, branch: Material = branch) -> tuple[Any, ...]:
+                return self._sample_state(branch, branch.sample(point, sample1, sample2), previous)
+
+            if len(self.branches) == 1:
+                state = dr.select(is_this, sample_branch(*state), state)
+            else:  # a symbolic branch per material, as in ``eval_pdf``
+                state = dr.if_stmt(state, is_this, sample_branch, lambda *kept: kept, label=branch.label)
+        wo, weight, pdf, delta, eta, transmitted, *rest = state
+        terms = list(rest[: self.max_beams])
+        ratios = rest[self.max_beams] if self.hero_ratios else None
         weight = dr.select(active, weight, 0.0)
         return MaterialSample(wo, weight, pdf, delta, eta, FilmSample(terms, transmitted), ratios)
+
+    def _sample_state(
+        self, branch: Material, sampled: MaterialSample, previous: tuple[Any, ...]
+    ) -> tuple[Any, ...]:
+        """``sampled`` as ``sample``'s flat state; what the kind does not produce (a film's terms, q_k)
+        keeps its ``previous`` value."""
+        film_slots = 1 + self.max_beams
+        film = previous[5 : 5 + film_slots]
+        if sampled.film is not None:
+            film = (sampled.film.transmitted, *sampled.film.terms)
+        ratios = previous[5 + film_slots :]
+        if sampled.pdf_ratios is not None:
+            if not self.hero_ratios:
+                raise AssertionError(
+                    f"{type(branch).__name__} returns pdf_ratios but declares hero_ratios False"
+                )
+            ratios = (sampled.pdf_ratios,)
+        return (sampled.wo, sampled.weight, sampled.pdf, sampled.delta, sampled.eta, *film, *ratios)

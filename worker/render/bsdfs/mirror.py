@@ -10,6 +10,7 @@ from worker.render.bsdfs.common import Material, MaterialSample, ShadingPoint
 
 class Mirror(Material):
     kind = mat.MaterialKind.MIRROR
+    hero_ratios = False
     spectra = (mat.ETA_ID, mat.KAPPA_ID)
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
