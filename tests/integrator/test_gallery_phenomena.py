@@ -297,7 +297,11 @@ def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_
 @pytest.mark.slow
 def test_cylinder_source_coherence_is_short_along_its_axis_only(tmp_path: Path) -> None:
     """Fig. 7: on the lit rim the tube (length L) gives ℓ₂ = r·√12/(k·L) (a uniform strip's VCZ,
-    M = (k/r)²L²/12) and a strongly anisotropic coherence; the sphere of the same power a far rounder one."""
+    M = (k/r)²L²/12) and a strongly anisotropic coherence; the sphere of the same power a far rounder one.
+
+    Tolerance: 3 % for the strip model (the tube's width, the rim's spread of view angles and of r),
+    plus 3 standard errors of the median ℓ₂ over the rim's pixels (which pixels pass the brightness cut
+    and their ℓ₂ vary with the samples at 16 spp: SE ≈ 1.2533·σ/√n, σ from the interquartile range)."""
     diagnostics = {}
     for kind in ("sphere", "cylinder"):
         name = f"fig7_thin_film_{kind}_light"
@@ -308,11 +312,15 @@ def test_cylinder_source_coherence_is_short_along_its_axis_only(tmp_path: Path) 
         diagnostics[kind] = {
             key: float(np.median(values[key][pixels])) for key in ("l2_um", "r_m", "anisotropy")
         }
+        quartiles = np.percentile(values["l2_um"][pixels], [25.0, 75.0])
+        sigma = (quartiles[1] - quartiles[0]) / 1.349
+        diagnostics[kind]["l2_median_se_um"] = 1.2533 * sigma / math.sqrt(pixels.sum())
     cylinder = diagnostics["cylinder"]
     (tube,) = example("fig7_thin_film_cylinder_light")["emitters"]
     length_m = float(np.linalg.norm(np.subtract(tube["p1_m"], tube["p0_m"])))
     expected_l2_um = cylinder["r_m"] * math.sqrt(12.0) / (K_550_PER_M * length_m) * 1e6
-    assert cylinder["l2_um"] == pytest.approx(expected_l2_um, rel=0.03)
+    tolerance_um = 0.03 * expected_l2_um + 3.0 * cylinder["l2_median_se_um"]
+    assert cylinder["l2_um"] == pytest.approx(expected_l2_um, abs=tolerance_um)
     assert cylinder["anisotropy"] > 4.0
     assert diagnostics["sphere"]["anisotropy"] < 2.5
 
@@ -364,7 +372,9 @@ def test_mirror_fed_flank_receives_the_more_coherent_light(tmp_path: Path) -> No
 def test_sixteen_modes_differ_from_one_mode_only_slightly(tmp_path: Path) -> None:
     """Fig. 9: with the same seed (the same paths) the 1- and 16-mode renders differ by ΔE₀₀ well under the
     just-noticeable 1 over most of the image, and by something (the modes are used) where light met the
-    disc's grating or the coated shell."""
+    disc's grating or the coated shell: were the modes unused, every pixel would be bitwise the same
+    (ΔE₀₀ = 0). At 48² × 16 spp 3.1–3.6 % of the pixels differ over seeds 0–4; how much the most changed
+    one differs depends on the paths a seed draws (max ΔE₀₀ 0.001–0.011), so the test counts pixels."""
     from service.image_metrics import delta_e00_map
 
     one = render("fig9_modes_1", tmp_path, 48, 16)
@@ -374,4 +384,4 @@ def test_sixteen_modes_differ_from_one_mode_only_slightly(tmp_path: Path) -> Non
     delta_e = delta_e00_map(one.bands, sixteen.bands, one.wavelengths_nm, exposure_ev)
     assert np.median(delta_e) < 0.5
     assert np.percentile(delta_e, 90) < 1.0
-    assert delta_e.max() > 0.01
+    assert np.mean(delta_e > 0.0) > 0.01

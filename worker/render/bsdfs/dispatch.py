@@ -38,7 +38,16 @@ MATERIAL_CLASSES: dict[mat.MaterialKind, type[Material]] = {
 
 
 class MaterialKernels:
-    """Gathers material parameters and dispatches to the kernels of the kinds present in the scene."""
+    """Gathers material parameters and dispatches to the kernels of the kinds present in the scene.
+
+    With one branch every lane evaluates it and keeps its result where it applies (``dr.select``); with
+    more, each branch runs in a symbolic branch (``dr.if_stmt``), which Dr.Jit's kernels skip in packets
+    without a lane of that material: a thin film's multi-beam terms are not computed for a packet of
+    floor lanes (the thin-film example's megakernel: −22 %). The lanes' results are the same floats either
+    way (tests/render/test_material_dispatch.py)."""
+
+    #: False: evaluate every branch in every lane and select (the reference the tests compare with)
+    symbolic_branches: bool = True
 
     def __init__(self, params: MaterialParams) -> None:
         self.params = params
@@ -149,11 +158,9 @@ class MaterialKernels:
             def evaluate(*_: mi.Spectrum, branch: Material = branch) -> tuple[mi.Spectrum, mi.Spectrum]:
                 return branch.eval_pdf(point, wo, coherence, phase)
 
-            if len(self.evaluating) == 1:
+            if len(self.evaluating) == 1 or not self.symbolic_branches:
                 evaluated = dr.select(is_this, evaluate(), evaluated)
             else:
-                # A symbolic branch per material: packets without a lane of this one skip its kernel
-                # (a thin film's multi-beam terms are wasted work on the diffuse floor next to it).
                 evaluated = dr.if_stmt(evaluated, is_this, evaluate, lambda *kept: kept, label=branch.label)
         return evaluated
 
@@ -195,9 +202,9 @@ class MaterialKernels:
             def sample_branch(*previous: Any, branch: Material = branch) -> tuple[Any, ...]:
                 return self._sample_state(branch, branch.sample(point, sample1, sample2), previous)
 
-            if len(self.branches) == 1:
+            if len(self.branches) == 1 or not self.symbolic_branches:
                 state = dr.select(is_this, sample_branch(*state), state)
-            else:  # a symbolic branch per material, as in ``eval_pdf``
+            else:
                 state = dr.if_stmt(state, is_this, sample_branch, lambda *kept: kept, label=branch.label)
         wo, weight, pdf, delta, eta, transmitted, *rest = state
         terms = list(rest[: self.max_beams])
