@@ -531,7 +531,6 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         wo_world: mi.Vector3f,
         continue_path: mi.Bool,
         film_passthrough: mi.Bool,
-        wavelengths: mi.Spectrum,
         record: PendingRecord,
         film: PendingFilm,
         first_vertex: FirstVertex,
@@ -839,7 +838,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             self._advance_throughput(path, bs, continue_path)
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             self._start_or_carry(
-                vertex, bs, wo_world, continue_path, film_passthrough, wavelengths, record, film, first_vertex
+                vertex, bs, wo_world, continue_path, film_passthrough, record, film, first_vertex
             )
 
             path.prev_si = mi.Interaction3f(si)

@@ -21,7 +21,7 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
-from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums
+from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums, column_count
 from hgcore.optics.sources import source_coefficients
 from worker.mitsuba_setup import load_mitsuba
 from worker.render.emitters import CylinderModes, EmitterKind
@@ -237,7 +237,7 @@ class Renderer:
         pixel_y = mi.Float(pixel // width)
         sums = self._lane_sums(sampler, pixel_x, pixel_y, lane_samples)
         # One launch of the path megakernel for every column (reducing them one by one would re-run the
-        # whole path loop for each), then one reduction launch for all of them.
+        # whole path loop for each), then a block sum per column over the pixel's lanes.
         dr.eval(sums)
         if lanes_per_pixel > 1:
             sums = [dr.block_sum(column, lanes_per_pixel) for column in sums]
@@ -253,8 +253,8 @@ class Renderer:
         (+9 ms a render). All of this loop's state changes, so it had nothing to find; the path loop
         inside keeps the optimisation."""
         mi = self.mi
-        column_count = 2 * self.compiled.bands.band_count + len(SUM_KEYS)
-        state = (mi.UInt32(0), [mi.Float(0.0) for _ in range(column_count)], sampler)
+        columns = column_count(self.compiled.bands.band_count)
+        state = (mi.UInt32(0), [mi.Float(0.0) for _ in range(columns)], sampler)
 
         def body(count: Any, sums: list[Any], sampler: Any) -> tuple[Any, list[Any], Any]:
             with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, True):

@@ -137,12 +137,6 @@ class MaterialParams:
         spectrum_id = mi.UInt32(self.param(material, offset))
         return lookup(mi, self.spectra, spectrum_id, wavelengths)
 
-    def vertex_spectra(
-        self, material: mi.UInt32, wavelengths: mi.Spectrum, offsets: Iterable[int] = ()
-    ) -> VertexSpectra:
-        """The spectra of ``material`` at ``wavelengths``, the ``offsets`` among them looked up now."""
-        return VertexSpectra(self, material, wavelengths, offsets)
-
     def kind(self, material: mi.UInt32) -> mi.UInt32:
         return mi.UInt32(self.param(material, mat.KIND))
 
@@ -185,7 +179,11 @@ class VertexSpectra:
     """
 
     def __init__(
-        self, params: MaterialParams, material: mi.UInt32, wavelengths: mi.Spectrum, offsets: Iterable[int]
+        self,
+        params: MaterialParams,
+        material: mi.UInt32,
+        wavelengths: mi.Spectrum,
+        offsets: Iterable[int] = (),
     ) -> None:
         self.params = params
         self.material = material
