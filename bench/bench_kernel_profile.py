@@ -8,8 +8,9 @@ scene that builds the scene (128×128 px, 64 spp, 16 bands, the scene's modes (1
 twice to compile (other seeds; Mitsuba's once), and then times ``REPEATS`` renders of
 ``Renderer.render_sums`` (its sums end in host copies, so lazy evaluation cannot hide work). This tree's
 subprocess also times Mitsuba's ``path`` and ``prb`` on the same loaded scene
-(``compiled.reference_dict``: Mitsuba's own BSDFs, RGB ``hdrfilm``, same depth), interleaved with
-``hg_path``.
+(``compiled.reference_dict``: Mitsuba's own BSDFs, RGB ``hdrfilm``, same depths), interleaved with
+``hg_path``; ``prb_rr_matched`` is prb with its roulette starting at the same vertex as ``path``'s and
+``hg_path``'s (prb.py counts ``rr_depth`` one vertex later).
 
 Per render it records the CPU time (``time.process_time``: both worker threads, robust to the other
 users of a shared machine) and the wall time, and from Dr.Jit's kernel history (``JitFlag.KernelHistory``)
@@ -80,9 +81,18 @@ def _probe(scene_name: str, with_mitsuba: bool) -> dict[str, list[dict[str, floa
     renderer = renderer_for(validate_scene(data))
     renders: dict[str, Any] = {"hg_path": lambda seed: renderer.render_sums(SPP, seed)}
     if with_mitsuba:
-        for name in ("path", "prb"):
+        rr_depth = renderer.integrator.rr_depth
+        # prb.py starts its roulette one vertex later than Mitsuba's ``path`` and ``hg_path`` for the same
+        # ``rr_depth`` (it tests the depth before counting the vertex): ``prb_rr_matched`` starts it at
+        # the same vertex, the like-for-like estimator; ``prb`` is prb at its default.
+        integrators = {
+            "path": {"type": "path", "rr_depth": rr_depth},
+            "prb": {"type": "prb", "rr_depth": rr_depth},
+            "prb_rr_matched": {"type": "prb", "rr_depth": rr_depth - 1},
+        }
+        for name, integrator in integrators.items():
             reference = dict(renderer.compiled.reference_dict)
-            reference["integrator"] = {"type": name, "max_depth": renderer.integrator.max_depth}
+            reference["integrator"] = {**integrator, "max_depth": renderer.integrator.max_depth}
             scene = mi.load_dict(reference, optimize=False)
             renders[name] = lambda seed, scene=scene: np.array(mi.render(scene, spp=SPP, seed=seed))
     dr.set_flag(dr.JitFlag.KernelHistory, True)

@@ -1,13 +1,13 @@
 """``hg_path``: a spectral path tracer that carries the coherence of light in Hermite-Gauss space.
 
 Estimator. Unidirectional path tracing from the camera with next-event estimation and MIS (balance
-heuristic; hero-wavelength MIS per path, Wilkie et al. 2014 §4, docs/integrator.md), Russian roulette
-from ``rr_depth``, and
-Mitsuba's ``max_depth`` convention (1 = emitters seen directly, 2 = direct illumination); as in prb.py the
-roulette's survival probability is min(max β·η², 0.95), η the product of the refractions' relative indices,
-so the radiance factors 1/η² of refraction are not mistaken for absorption. Emitter surfaces absorb.
-``trace`` reads like Mitsuba's prb.py: its loop state is declared together (the ``loop_struct`` classes
-below) and banner comments mark the phases of a bounce.
+heuristic; hero-wavelength MIS per path, Wilkie et al. 2014 §4, docs/integrator.md) and Russian roulette,
+both depths in Mitsuba's convention (``max_depth`` 1 = emitters seen directly, 2 = direct illumination;
+``rr_depth`` 1 = roulette may end a path at the camera-visible surface, as Mitsuba's ``path``). As in
+prb.py the roulette's survival probability is min(max β·η², 0.95), η the product of the refractions'
+relative indices, so the radiance factors 1/η² of refraction are not mistaken for absorption. Emitter
+surfaces absorb. ``trace`` reads like Mitsuba's prb.py: its loop state is declared together (the
+``loop_struct`` classes below) and banner comments mark the phases of a bounce.
 
 Coherence state (paper §5.2: "each traced ray carries the shape matrix, transverse HG coefficients, the
 propagation direction and distance r"). Because paths start at the camera, the coherence of the light a
@@ -70,6 +70,7 @@ from worker.render.emitters import (
     emitter_rect_modes,
     sphere_solid_angle,
 )
+from worker.render.spectral import cie1931_xyz
 from worker.render.wavelength_sampling import lane_weights
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
@@ -110,8 +111,26 @@ class RenderContext:
     camera_position: mi.Point3f  # world-space centre of projection
     camera_right: mi.Vector3f  # world-space unit vectors of the image's +x and +y (up) directions
     camera_up: mi.Vector3f
+    cie1931: mi.Float  # Mitsuba's CIE 1931 table as an array of our own (``spectral.cie1931_table``)
     # The open cylinders' view-dependent modes (None: no cylinder, or one mode).
     cylinder_modes: CylinderModes | None = None
+
+    def kernel_tables(self) -> list[typing.Any]:
+        """The arrays of this context that kernels read (what a frozen pass names as inputs)."""
+        tables = [
+            self.material_flat,
+            self.spectra_flat,
+            self.shape_material,
+            self.emitter_flat,
+            self.emitter_index,
+            self.camera_position,
+            self.camera_right,
+            self.camera_up,
+            self.cie1931,
+        ]
+        if self.cylinder_modes is not None:
+            tables.append(self.cylinder_modes.values)
+        return tables
 
 
 @dataclass
@@ -269,6 +288,14 @@ class Vertex(NamedTuple):
 def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
     """Balance heuristic p_a/(p_a + p_b) of the strategy with density ``pdf_a`` (hero-MIS densities)."""
     return pdf_a / dr.maximum(pdf_a + pdf_b, 1e-20)
+
+
+def roulette_applies(vertex_index: mi.UInt32, rr_depth: int) -> mi.Bool:
+    """Whether Russian roulette may end a path at its vertex ``vertex_index`` (0: the camera-visible
+    surface). Depths count as ``max_depth`` does, vertex i at depth i + 1, so ``rr_depth`` = 1 lets
+    roulette end a path at the camera-visible surface: the meaning Mitsuba documents and its C++ ``path``
+    implements (prb.py starts one vertex later, at depth ``rr_depth`` + 1)."""
+    return vertex_index + 1 >= rr_depth
 
 
 def _luminance(y_weights: list[mi.Float], value: mi.Spectrum) -> mi.Float:
@@ -684,7 +711,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
         wavelengths = mi.Spectrum(ray.wavelengths)
         lane_weight = lane_weights(span_nm, len(wavelengths), wavelength_ratios)
-        y_weights = [mi.cie1931_y(wavelengths[j]) * lane_weight[j] for j in range(len(wavelengths))]
+        cie = self.context.cie1931
+        y_weights = [
+            cie1931_xyz(mi, cie, wavelengths[j])[1] * lane_weight[j] for j in range(len(wavelengths))
+        ]
         # Loop state (Dr.Jit traverses each struct): the estimator, the pending coherence record and its
         # film, the first non-specular vertex, the diagnostics sums and the first-hit AOVs.
         path = PathState()
@@ -850,7 +880,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             # ---------------------- Russian roulette (on β·η², prb.py) ---------------------------
             beta_max = dr.max(path.beta)
-            rr_active = path.depth >= self.rr_depth
+            rr_active = roulette_applies(path.depth, self.rr_depth)
             rr_probability = dr.minimum(beta_max * dr.square(path.eta), 0.95)
             survive = sampler.next_1d(continue_path) < rr_probability
             path.beta = dr.select(rr_active, path.beta * dr.rcp(dr.maximum(rr_probability, 1e-6)), path.beta)

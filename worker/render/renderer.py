@@ -11,11 +11,23 @@ chunks merge by adding sums.
 
 Kernel compilation: Dr.Jit caches compiled kernels by the hash of their IR (in memory and on disk under
 ``~/.drjit``), so a second render of a scene with the same structure and constants skips compilation.
+
+Frozen passes: a pass is a frozen function (``dr.freeze``): its first call traces the path loop (~10 ms
+of Python per pass, 2 % of a 128² × 64 spp Cornell box's CPU time) and records the kernels it launches;
+later passes of the same shape (rows, spp) replay them with the new seed. A recording names what its
+kernels read: the scene, the seed and the tile's first pixel (opaque arguments), every table of the
+integrator, materials and wavelength sampler (``_pass_state``, each owner's ``kernel_tables``), and the
+Python settings the trace depends on (a change records again). Replays are bitwise the traced passes
+(tests/integrator/test_frozen_passes.py); a scene whose kernels read an array no owner names cannot be
+recorded, and renders unfrozen (with a warning) rather than not at all.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import gc
+import logging
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import drjit as dr
@@ -24,11 +36,15 @@ import numpy as np
 from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums, column_count
 from hgcore.optics.sources import source_coefficients
 from worker.mitsuba_setup import load_mitsuba
+from worker.render.bsdfs import MaterialKernels
 from worker.render.emitters import CylinderModes, EmitterKind
 from worker.render.integrator import RenderContext, register
 from worker.render.rlt import integrator_class
 from worker.render.scene_compiler import CompiledScene
+from worker.render.spectral import cie1931_table, cie1931_xyz
 from worker.render.wavelength_sampling import WavelengthSampler, lane_weights, scene_density
+
+log = logging.getLogger(__name__)
 
 MAX_WAVEFRONT = 1 << 20  # samples per pass (their lanes' ~60 float32 sums stay in memory until reduced)
 SAMPLES_PER_LANE = 16
@@ -37,6 +53,9 @@ stores and reduces 1/16 of the per-sample outputs (60 float32 columns: 18 of the
 Cornell box went to storing and block-summing them per sample); a pixel's 16-lane packets still trace
 that pixel's samples (its camera rays stay coherent), which a loop over all of a pixel's samples in one
 lane would give up (+3 % megakernel time, measured)."""
+FROZEN_PASS_SHAPES = 4
+"""Recordings a renderer keeps (least recently used dropped): a render has at most two tile heights and
+two pass sizes (the full one and the remainder)."""
 TILE_PIXELS = 1 << 18
 """Pixels per tile (row band), at least one row. A tile's float64 sums (2B + 28 columns: 188 MiB at 32
 bands) are all the per-pixel state a render holds; 4 spp per pass at 1 M samples keeps passes full."""
@@ -95,6 +114,9 @@ class Renderer:
         self.wavelengths = WavelengthSampler(
             mi, compiled.bands, scene_density(compiled.scene, compiled.bands)
         )
+        #: whether passes replay recorded kernels (module docstring, "Frozen passes")
+        self.frozen_passes = True
+        self._frozen_pass = dr.freeze(self._pass_columns, state_fn=self._pass_state, limit=FROZEN_PASS_SHAPES)
 
     def _context(self) -> RenderContext:
         mi = self.mi
@@ -138,6 +160,7 @@ class Renderer:
             camera_right=camera_right,
             camera_up=camera_up,
             camera_position=camera_position,
+            cie1931=cie1931_table(mi),
         )
 
     def _screen_axes(self) -> tuple[list[float], list[float]]:
@@ -219,18 +242,63 @@ class Renderer:
 
     def _render_pass(self, y0: int, y1: int, spp: int, seed: int) -> list[Any]:
         """Launch one pass over rows [y0, y1): per-pixel float32 sums of ``spp`` samples, one Dr.Jit
-        array per column (bands, bands², then ``SUM_KEYS``), being evaluated asynchronously."""
+        array per column (bands, bands², then ``SUM_KEYS``), being evaluated asynchronously. Frozen
+        (module docstring) unless this scene's kernels could not be recorded."""
+        mi = self.mi
+        # Opaque: as literals the seed and the tile's first pixel would be part of the kernels' IR (and of
+        # the recording), so that every pass and tile compiled (and recorded) its own copy.
+        arguments = (
+            self.scene,
+            dr.opaque(mi.UInt32, seed),
+            dr.opaque(mi.UInt32, y0 * self.width),
+            y1 - y0,
+            spp,
+        )
+        if self.frozen_passes:
+            try:
+                with _collector_paused():
+                    return self._frozen_pass(*arguments)
+            except RuntimeError as error:
+                # Raised while recording, before any kernel ran: the traced pass below gives the same sums
+                # (and raises again if the error was not the recording's).
+                log.warning("render passes of this scene run unfrozen: %s", str(error).splitlines()[0])
+                self.frozen_passes = False
+        return self._pass_columns(*arguments)
+
+    def _pass_state(self, *_: Any) -> tuple[list[Any], tuple[Any, ...]]:
+        """What a frozen pass reads besides its arguments: the arrays its kernels gather from, and the
+        Python settings its trace depends on (hashed: a change records the pass again)."""
+        integrator = self.integrator
+        tables = (
+            integrator.context.kernel_tables()
+            + integrator.kernels.kernel_tables()
+            + self.wavelengths.kernel_tables()
+        )
+        settings = (
+            type(integrator).__qualname__,
+            integrator.max_depth,
+            integrator.rr_depth,
+            integrator.plane_waves,
+            MaterialKernels.symbolic_branches,
+            SAMPLES_PER_LANE,
+            self.width,
+            self.height,
+        )
+        return tables, settings
+
+    def _pass_columns(self, scene: Any, seed: Any, first_pixel: Any, rows: int, spp: int) -> list[Any]:
+        """The kernels of one pass (``_render_pass``; ``scene`` is ``self.scene``, an argument so that a
+        frozen pass traverses it): ``spp`` samples per pixel of ``rows`` rows from pixel ``first_pixel``."""
         mi = self.mi
         width = self.width
         lane_samples = samples_per_lane(spp)
         lanes_per_pixel = spp // lane_samples
-        wavefront = width * (y1 - y0) * lanes_per_pixel
+        wavefront = width * rows * lanes_per_pixel
         index = dr.arange(mi.UInt32, wavefront)
-        # Opaque: as a literal the tile's first pixel would be part of the kernel's IR, and every tile
-        # would compile its own copy of the path megakernel. The pass's spp and the image size stay
-        # literals: divisions by them compile to multiply-shift sequences, while opaque divisors made the
-        # megakernel ~5 % slower (bench_compare, Cornell 128²); a new spp per pass compiles once (~0.3 s).
-        pixel = index // lanes_per_pixel + dr.opaque(mi.UInt32, y0 * width)
+        # The pass's spp and the image size stay literals: divisions by them compile to multiply-shift
+        # sequences, while opaque divisors made the megakernel ~5 % slower (bench_compare, Cornell 128²);
+        # a new spp per pass compiles once (~0.3 s).
+        pixel = index // lanes_per_pixel + first_pixel
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, wavefront)
         pixel_x = mi.Float(pixel % width)
@@ -296,8 +364,9 @@ class Renderer:
             band_values.append(value * band_scale)
         xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
         albedo_xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
+        cie = self.integrator.context.cie1931
         for j in range(lane_count):
-            cmf = mi.cie1931_xyz(wavelengths[j])
+            cmf = cie1931_xyz(mi, cie, wavelengths[j])
             for c in range(3):
                 xyz[c] += cmf[c] * result.radiance[j] * weights[j]
                 albedo_xyz[c] += cmf[c] * result.albedo[j] * weights[j] * mi.MI_CIE_Y_NORMALIZATION
@@ -322,6 +391,20 @@ class Renderer:
         }
         squares = [dr.square(value) for value in band_values]
         return band_values + squares + [per_sample[key] for key in SUM_KEYS]
+
+
+@contextlib.contextmanager
+def _collector_paused() -> Iterator[None]:
+    """Python's cyclic garbage collector paused: a renderer is freed by it (renderers hold reference
+    cycles), and freeing one's frozen pass while another pass records or replays aborts the process in
+    drjit-core (seen in the test suite), so it must not run inside a frozen call."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def vcz_sums(weight: Any, weighted_r: Any, direction: Any) -> dict[str, Any]:

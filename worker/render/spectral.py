@@ -7,6 +7,10 @@ estimator of the band-averaged spectral radiance (1/Δ_b)∫_b L dλ in W·m⁻�
 
 Material spectra (reflectances, refractive indices) live in one flat table sampled on a regular grid
 (``GRID_MIN_NM`` … ``GRID_MAX_NM`` every ``GRID_STEP_NM``) and are linearly interpolated in the kernel.
+
+The CIE 1931 colour-matching functions the kernels weight samples with (luminance, XYZ) are Mitsuba's, in a
+table of our own (``cie1931_table``): a frozen render pass (``renderer``) must name every array its kernels
+read, and Mitsuba's table is a global that no frozen function can reach.
 """
 
 from __future__ import annotations
@@ -53,6 +57,39 @@ class SpectralTable:
         if not self._rows:
             return np.zeros(GRID_SIZE, dtype=np.float32)
         return np.concatenate(self._rows)
+
+
+# Mitsuba's CIE 1931 2° table: MI_CIE_SAMPLES nodes from MI_CIE_MIN to MI_CIE_MAX (nm), every 5 nm.
+CIE_MIN_NM = 360.0
+CIE_MAX_NM = 830.0
+CIE_SAMPLES = 95
+
+
+def cie1931_table(mi):
+    """x̄, ȳ, z̄ of Mitsuba's CIE 1931 table at its nodes, flattened as [x̄ nodes, ȳ nodes, z̄ nodes] (one
+    mi.Float): read through ``mi.cie1931_xyz`` at the nodes, where its interpolation returns them exactly."""
+    nodes = np.linspace(CIE_MIN_NM, CIE_MAX_NM, CIE_SAMPLES)
+    values = mi.cie1931_xyz(mi.Float(nodes))
+    return mi.Float(np.concatenate([np.asarray(component) for component in values]).astype(np.float32))
+
+
+def cie1931_xyz(mi, table, wavelengths_nm):
+    """(x̄, ȳ, z̄) at ``wavelengths_nm`` (mi.Float) from ``cie1931_table``, interpolated as Mitsuba's
+    ``cie1931_xyz`` does (the same floats: tests/render/test_spectral_tables.py); 0 outside the table."""
+    import drjit as dr
+
+    position = (wavelengths_nm - CIE_MIN_NM) * ((CIE_SAMPLES - 1) / (CIE_MAX_NM - CIE_MIN_NM))
+    inside = (wavelengths_nm >= CIE_MIN_NM) & (wavelengths_nm <= CIE_MAX_NM)
+    lower = dr.clip(mi.UInt32(position), 0, CIE_SAMPLES - 2)
+    upper_weight = position - mi.Float(lower)
+    lower_weight = 1.0 - upper_weight
+    result = []
+    for component in range(3):
+        base = component * CIE_SAMPLES + lower
+        low = dr.gather(mi.Float, table, base, inside)
+        high = dr.gather(mi.Float, table, base + 1, inside)
+        result.append(dr.select(inside, dr.fma(lower_weight, low, upper_weight * high), 0.0))
+    return tuple(result)
 
 
 def lookup(mi, table, spectrum_id, wavelengths):

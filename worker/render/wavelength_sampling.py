@@ -227,6 +227,10 @@ class WavelengthSampler:
         self.knots = None if density is None else quantile_knots(density)
         self._knots = None if self.knots is None else mi.Float(self.knots)
 
+    def kernel_tables(self) -> list[Any]:
+        """The arrays ``sample`` reads: the quantile table (none for uniform sampling)."""
+        return [] if self._knots is None else [self._knots]
+
     def sample(self, u: Any) -> WavelengthSample:
         """The hero set of ``u`` (mi.Float in [0, 1)): u_j = frac(u + j/4) mapped through P⁻¹."""
         import drjit as dr

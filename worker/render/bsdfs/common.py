@@ -232,6 +232,11 @@ class Material:
         self.index = index  # the material's table index (model kinds only)
         self.model = None if index is None else params.materials.records[index].model
 
+    def kernel_tables(self) -> list[mi.Float]:
+        """Arrays of the kind's own that its kernels read besides ``params``' (what a frozen render pass
+        names as inputs; ``renderer``)."""
+        return []
+
     @property
     def record(self) -> mat.MaterialRecord:
         assert self.index is not None, "table kinds have no single record"

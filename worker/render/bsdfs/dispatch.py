@@ -74,6 +74,13 @@ class MaterialKernels:
             branch for branch in self.branches if type(branch).eval_pdf is not Material.eval_pdf
         ]
 
+    def kernel_tables(self) -> list[mi.Float]:
+        """Every array the material kernels read: the material and spectral tables and the kinds' own."""
+        tables = [self.params.table, self.params.spectra]
+        for branch in self.branches:
+            tables += branch.kernel_tables()
+        return tables
+
     # ---------------------------------------------------------------- parameters and kinds
     def param(self, material: mi.UInt32, offset: int) -> mi.Float:
         return self.params.param(material, offset)

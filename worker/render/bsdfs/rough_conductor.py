@@ -13,7 +13,15 @@ import mitsuba as mi
 
 from hgcore.optics import rough_surface
 from worker.render import materials as mat
-from worker.render.bsdfs.common import OPS, IncidentCoherence, Material, MaterialSample, ShadingPoint, vec
+from worker.render.bsdfs.common import (
+    OPS,
+    IncidentCoherence,
+    Material,
+    MaterialParams,
+    MaterialSample,
+    ShadingPoint,
+    vec,
+)
 from worker.render.bsdfs.lobes import mean_over_wavelengths, specular_or_lobe, split_specular
 
 
@@ -22,7 +30,14 @@ class RoughConductor(Material):
     per_material = True
     spectra = (mat.ETA_ID, mat.KAPPA_ID)
     model: rough_surface.RoughSurface
-    _fraction_table: mi.Float | None = None  # built on first use (``_reflection_fraction``)
+
+    def __init__(self, params: MaterialParams, index: int | None = None) -> None:
+        super().__init__(params, index)
+        # The propagating fraction P on a (sin θ, λ) grid (``_reflection_fraction``), built once per surface.
+        self._fraction_table = mi.Float(rough_surface.reflection_fraction_table(self.model).ravel())
+
+    def kernel_tables(self) -> list[mi.Float]:
+        return [self._fraction_table]
 
     def reflectance(self, point: ShadingPoint, wo: mi.Vector3f) -> list[mi.Spectrum]:
         """The interface's reflectance terms for light arriving along ``wo``: [F(θ_i)] for a conductor (the
@@ -65,8 +80,6 @@ class RoughConductor(Material):
     def _reflection_fraction(self, sin_theta: mi.Float, wavelength_nm: mi.Float) -> mi.Float:
         """Propagating fraction P of reflection in air, bilinear in ``reflection_fraction_table`` (built once
         per surface): 4 gathers instead of a 32-node angular integral per wavelength and sample."""
-        if self._fraction_table is None:
-            self._fraction_table = mi.Float(rough_surface.reflection_fraction_table(self.model).ravel())
         table = self._fraction_table
         columns = len(rough_surface.TABLE_WAVELENGTHS_M)
         first = float(rough_surface.TABLE_WAVELENGTHS_M[0]) * 1e9
