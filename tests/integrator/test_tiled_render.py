@@ -24,7 +24,7 @@ from hgcore.artifacts.running_sums import RunningSums
 from hgcore.noise_target import ImageErrors
 from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
 from worker.render.api import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
-from worker.render.renderer import tile_rows
+from worker.render.renderer import row_order, tile_rows, tile_seed
 
 
 def all_channels(out_dir: Path) -> dict[str, np.ndarray]:
@@ -94,7 +94,10 @@ def test_tiles_render_distinct_samples_with_the_same_expectation(
     tiled, whole = all_channels(tmp_path / "tiled"), all_channels(tmp_path / "whole")
     band = next(name for name in tiled if name.startswith("S0."))
     assert not np.array_equal(tiled[band][3:], whole[band][3:])  # rows below the first tile differ
-    assert np.array_equal(tiled[band][:3], whole[band][:3])  # tile 0 keeps the chunk's own seed
+    # Tile 0 keeps the chunk's own seed (an image of one tile renders with the chunk's seed); its rows are
+    # not the whole image's first rows bitwise, since a pass orders a tile's rows by the tile's height
+    # (``renderer.row_order``).
+    assert tile_seed(1234, 0) == 1234 and tile_seed(1234, 1) != 1234
     # Standard error of the image mean: √(Σ variance of the pixel means)/P, for each render.
     pixels = tiled[band].size
     sigma = np.sqrt(tiled[f"variance/{band}"].sum() + whole[f"variance/{band}"].sum()) / pixels
@@ -199,3 +202,14 @@ def test_image_errors_from_row_bands_equal_those_of_the_whole_image() -> None:
     expected = np.sqrt(variance.sum(axis=(0, 1))) / mean.sum(axis=(0, 1))
     np.testing.assert_allclose(at_once.band_rel_errors(), expected, rtol=1e-14)
     assert by_bands.pixels == 54 and by_bands.sample_count == 4
+
+
+@pytest.mark.parametrize("rows", [1, 2, 3, 16, 60, 128, 1000])
+def test_row_order_is_a_permutation_whose_runs_cover_the_tile_evenly(rows: int) -> None:
+    order = row_order(rows)
+    assert sorted(order.tolist()) == list(range(rows))
+    if rows >= 16:
+        # Each half of the slots (one core's block on two cores) has rows from every quarter of the tile.
+        for half in (order[: rows // 2], order[rows // 2 :]):
+            assert sorted(set(half * 4 // rows)) == [0, 1, 2, 3]
+            assert abs(half.mean() - (rows - 1) / 2) < 0.1 * rows

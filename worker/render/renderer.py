@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import logging
+import math
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -74,8 +75,8 @@ def tile_bands(width: int, height: int) -> list[tuple[int, int]]:
 
 
 def tile_seed(chunk_seed: int, tile_index: int) -> int:
-    """The seed of a chunk's tile: the chunk's own for tile 0 (an image of one tile renders the samples it
-    rendered before tiling), distinct 32-bit mixes for the others."""
+    """The seed of a chunk's tile: the chunk's own for tile 0 (an image of one tile renders with the chunk's
+    seed), distinct 32-bit mixes for the others."""
     if tile_index == 0:
         return chunk_seed
     return (chunk_seed * 0x2C1B3C6D + tile_index * 0x297A2D39 + 0x7ED55D16) & 0xFFFFFFFF
@@ -88,6 +89,28 @@ def samples_per_lane(spp: int) -> int:
     while count < SAMPLES_PER_LANE and spp % (2 * count) == 0:
         count *= 2
     return count
+
+
+def row_stride(rows: int) -> int:
+    """The stride of ``row_order``: the integer nearest rows/φ (φ the golden ratio) that is coprime with
+    ``rows``, so that k ↦ k·stride mod rows is a permutation."""
+    target = rows / ((1.0 + math.sqrt(5.0)) / 2.0)
+    for offset in range(rows):
+        for stride in (round(target) - offset, round(target) + offset):
+            if 1 <= stride < rows and math.gcd(stride, rows) == 1:
+                return stride
+    return 1  # rows ≤ 2
+
+
+def row_order(rows: int) -> np.ndarray:
+    """The order in which a pass traces a tile's ``rows`` rows: slot k traces row k·``row_stride`` mod
+    rows. Why: Dr.Jit's LLVM backend splits a wavefront of up to 2 × 16 384 lanes per core into one
+    contiguous block per core (``LLVMThreadState::launch``), so in image order one core traced the top of a
+    128² × 64 spp tile (the Cornell box's light and ceiling: short paths) and the other its bottom, and the
+    kernel lasted as long as the slower half. With a golden-ratio stride every run of consecutive slots
+    covers the tile's rows evenly (a Weyl sequence), whatever the number of blocks; rows stay whole, so a
+    packet's camera rays stay coherent."""
+    return np.arange(rows) * row_stride(rows) % rows
 
 
 def pass_seed(chunk_seed: int, pass_index: int) -> int:
@@ -237,7 +260,9 @@ class Renderer:
             else:
                 totals += columns
         assert totals is not None
-        table = totals.reshape(y1 - y0, self.width, totals.shape[-1])
+        # Passes trace the tile's rows in ``row_order``: put them back in image order.
+        table = np.empty((y1 - y0, self.width, totals.shape[-1]))
+        table[row_order(y1 - y0)] = totals.reshape(table.shape)
         return PixelSums.from_table(spp, self.compiled.bands.band_count, table)
 
     def _render_pass(self, y0: int, y1: int, spp: int, seed: int) -> list[Any]:
@@ -245,15 +270,9 @@ class Renderer:
         array per column (bands, bands², then ``SUM_KEYS``), being evaluated asynchronously. Frozen
         (module docstring) unless this scene's kernels could not be recorded."""
         mi = self.mi
-        # Opaque: as literals the seed and the tile's first pixel would be part of the kernels' IR (and of
+        # Opaque: as literals the seed and the tile's first row would be part of the kernels' IR (and of
         # the recording), so that every pass and tile compiled (and recorded) its own copy.
-        arguments = (
-            self.scene,
-            dr.opaque(mi.UInt32, seed),
-            dr.opaque(mi.UInt32, y0 * self.width),
-            y1 - y0,
-            spp,
-        )
+        arguments = (self.scene, dr.opaque(mi.UInt32, seed), dr.opaque(mi.UInt32, y0), y1 - y0, spp)
         if self.frozen_passes:
             try:
                 with _collector_paused():
@@ -286,9 +305,10 @@ class Renderer:
         )
         return tables, settings
 
-    def _pass_columns(self, scene: Any, seed: Any, first_pixel: Any, rows: int, spp: int) -> list[Any]:
+    def _pass_columns(self, scene: Any, seed: Any, first_row: Any, rows: int, spp: int) -> list[Any]:
         """The kernels of one pass (``_render_pass``; ``scene`` is ``self.scene``, an argument so that a
-        frozen pass traverses it): ``spp`` samples per pixel of ``rows`` rows from pixel ``first_pixel``."""
+        frozen pass traverses it): ``spp`` samples per pixel of ``rows`` rows from row ``first_row``, the
+        rows in ``row_order`` (row slot k of the wavefront traces row ``row_order(rows)[k]``)."""
         mi = self.mi
         width = self.width
         lane_samples = samples_per_lane(spp)
@@ -298,11 +318,12 @@ class Renderer:
         # The pass's spp and the image size stay literals: divisions by them compile to multiply-shift
         # sequences, while opaque divisors made the megakernel ~5 % slower (bench_compare, Cornell 128²);
         # a new spp per pass compiles once (~0.3 s).
-        pixel = index // lanes_per_pixel + first_pixel
+        slot_pixel = index // lanes_per_pixel
+        row = (slot_pixel // width) * row_stride(rows) % rows
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed, wavefront)
-        pixel_x = mi.Float(pixel % width)
-        pixel_y = mi.Float(pixel // width)
+        pixel_x = mi.Float(slot_pixel % width)
+        pixel_y = mi.Float(first_row + row)
         sums = self._lane_sums(sampler, pixel_x, pixel_y, lane_samples)
         # One launch of the path megakernel for every column (reducing them one by one would re-run the
         # whole path loop for each), then a block sum per column over the pixel's lanes.
