@@ -75,7 +75,7 @@ def cie1931_table(mi):
 
 def cie1931_xyz(mi, table, wavelengths_nm):
     """(x̄, ȳ, z̄) at ``wavelengths_nm`` (mi.Float) from ``cie1931_table``, interpolated as Mitsuba's
-    ``cie1931_xyz`` does (the same floats: tests/render/test_spectral_tables.py); 0 outside the table."""
+    ``cie1931_xyz`` does (the same floats: tests/integrator/test_frozen_passes.py); 0 outside the table."""
     import drjit as dr
 
     position = (wavelengths_nm - CIE_MIN_NM) * ((CIE_SAMPLES - 1) / (CIE_MAX_NM - CIE_MIN_NM))
