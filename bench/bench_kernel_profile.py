@@ -9,8 +9,8 @@ twice to compile (other seeds; Mitsuba's once), and then times ``REPEATS`` rende
 ``Renderer.render_sums`` (its sums end in host copies, so lazy evaluation cannot hide work). This tree's
 subprocess also times Mitsuba's ``path`` and ``prb`` on the same loaded scene
 (``compiled.reference_dict``: Mitsuba's own BSDFs, RGB ``hdrfilm``, same depths), interleaved with
-``hg_path``; ``prb_rr_matched`` is prb with its roulette starting at the same vertex as ``path``'s and
-``hg_path``'s (prb.py counts ``rr_depth`` one vertex later).
+``hg_path`` in an order that reverses every repeat; ``prb_rr_matched`` is prb with its roulette starting
+at the same vertex as ``path``'s and ``hg_path``'s (prb.py counts ``rr_depth`` one vertex later).
 
 Per render it records the CPU time (``time.process_time``: both worker threads, robust to the other
 users of a shared machine) and the wall time, and from Dr.Jit's kernel history (``JitFlag.KernelHistory``)
@@ -18,7 +18,9 @@ the megakernel's execution time and operation count, the IR assembly (``codegen_
 launch) and the LLVM compilation (``backend_time`` of cache misses: 0 once warm) of all kernels, and the
 time outside kernels (tracing the Python loop body, host copies and sums: CPU − kernel CPU is not
 separable on two threads, so wall − kernel wall is reported). The report keeps medians over renders and
-rounds, and the ratios hg_path/path, hg_path/prb and this/each other tree of the medians.
+rounds, and the ratios hg_path/path, hg_path/prb and this/each other tree of the medians; against
+Mitsuba's integrators also ``paired_ratios``, the medians of per-pair ratios (render i of ``hg_path``
+over render i of the other, adjacent in one process), which cancel the drift between renders.
 
 Results go to stdout and ``bench/results/kernel_profile.json`` (written atomically).
 """
@@ -37,7 +39,10 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ("cornell_box", "thin_film_cylinder_light")
-SIZE_PX, SPP, BANDS, REPEATS = 128, 64, 16, 3
+SIZE_PX, SPP, BANDS, REPEATS = 128, 64, 16, 4  # REPEATS even: each order equally often
+
+
+PAIRED_METRICS = ("cpu_s", "wall_s", "megakernel_exec_s")
 
 
 def _render_record(render: Any, seed: int) -> dict[str, float]:
@@ -103,9 +108,11 @@ def _probe(scene_name: str, with_mitsuba: bool) -> dict[str, list[dict[str, floa
         for name, render in renders.items():
             if name == "hg_path" or seed == 101:
                 warm_up[name].append(_render_record(render, seed))
+    names = list(renders)
     for seed in range(REPEATS):
-        for name, render in renders.items():
-            records[name].append(_render_record(render, seed))
+        # A B C D, D C B A, …: no integrator always runs first (after another's allocations) or last.
+        for name in names if seed % 2 == 0 else names[::-1]:
+            records[name].append(_render_record(renders[name], seed))
     return {"timed": records, "warm_up": warm_up}
 
 
@@ -125,6 +132,19 @@ def _medians(records: list[dict[str, float]]) -> dict[str, float]:
     return {key: statistics.median(record[key] for record in records) for key in records[0]}
 
 
+def _add_pairs(paired: dict[str, dict[str, list[float]]], timed: dict[str, list[dict[str, float]]]) -> None:
+    """Append this subprocess's per-pair ratios hg_path/X (render i of hg_path over render i of each
+    Mitsuba integrator X, adjacent in time): a pair shares the machine's state of the moment, so its
+    ratio cancels the drift between renders that a ratio of overall medians keeps."""
+    for integrator, records in timed.items():
+        if integrator == "hg_path":
+            continue
+        metrics = paired.setdefault(f"this/{integrator}", {})
+        for ours, theirs in zip(timed["hg_path"], records, strict=True):
+            for metric in PAIRED_METRICS:
+                metrics.setdefault(metric, []).append(ours[metric] / theirs[metric])
+
+
 def main(trees: dict[str, Path], rounds: int, scenes: list[str]) -> dict[str, Any]:
     """``trees``: name → checkout; the first is this tree (which also times Mitsuba's integrators)."""
     from bench.machine import MachineLoad, write_results
@@ -142,6 +162,7 @@ def main(trees: dict[str, Path], rounds: int, scenes: list[str]) -> dict[str, An
         for scene_name in scenes:
             per_render: dict[str, list[dict[str, float]]] = {}
             round_medians: dict[str, list[float]] = {}
+            paired: dict[str, dict[str, list[float]]] = {}
             for index in range(rounds):
                 order = names if index % 2 == 0 else names[::-1]
                 for name in order:
@@ -154,17 +175,28 @@ def main(trees: dict[str, Path], rounds: int, scenes: list[str]) -> dict[str, An
                         )
                         if index == 0:
                             per_render.setdefault(f"{key}/warm_up", []).extend(probe["warm_up"][integrator])
+                    if name == names[0]:
+                        _add_pairs(paired, probe["timed"])
             summary = {key: _medians(records) for key, records in per_render.items()}
             this = summary[names[0]]
             ratios = {}
             for key in per_render:
                 if key != names[0] and not key.endswith("/warm_up"):
                     ratios[f"{names[0]}/{key}"] = {
-                        metric: this[metric] / summary[key][metric]
-                        for metric in ("cpu_s", "wall_s", "megakernel_exec_s")
+                        metric: this[metric] / summary[key][metric] for metric in PAIRED_METRICS
                     }
-            results[scene_name] = {"medians": summary, "round_cpu_medians_s": round_medians, "ratios": ratios}
-            print(scene_name, json.dumps(ratios, indent=1))
+            paired_ratios = {
+                key: {metric: statistics.median(values) for metric, values in metrics.items()}
+                for key, metrics in paired.items()
+            }
+            results[scene_name] = {
+                "medians": summary,
+                "round_cpu_medians_s": round_medians,
+                "ratios": ratios,
+                "paired_ratios": paired_ratios,
+                "paired_ratio_samples": paired,
+            }
+            print(scene_name, json.dumps({"ratios": ratios, "paired_ratios": paired_ratios}, indent=1))
     finally:
         for copy in copies:
             copy.unlink()
@@ -175,7 +207,8 @@ def main(trees: dict[str, Path], rounds: int, scenes: list[str]) -> dict[str, An
         "repeats_per_round": REPEATS,
         "rounds": rounds,
         "trees": {name: str(path) for name, path in trees.items()},
-        "note": "medians over all timed renders of all rounds; cpu_s = process_time (both threads)",
+        "note": "ratios: of the medians over all timed renders of all rounds; paired_ratios: medians of "
+        "per-pair ratios (adjacent renders in one process); cpu_s = process_time (both threads)",
         **load.fields(),
         "scenes": results,
     }

@@ -19,17 +19,46 @@ from hgcore.artifacts.images import atomic_write_bytes
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 REFERENCE_ITERATIONS = 2_000_000
+CPUINFO = Path("/proc/cpuinfo")
 
 
-def cpu_model() -> str:
-    """The CPU model name from /proc/cpuinfo (Linux), else the platform's processor string."""
+SIMD_EXTENSIONS = ("avx512f", "avx2", "avx", "sse4_2")
+"""x86 vector extensions, widest first: Dr.Jit's LLVM backend traces 16-lane packets with AVX-512 and
+8-lane ones with AVX2, which changes how often a packet can skip a symbolic branch, so ratios between
+integrators measured on one ISA need not hold on another."""
+
+
+def _cpuinfo_fields(cpuinfo: Path) -> dict[str, str]:
+    """The first processor's ``key: value`` lines of ``cpuinfo`` (empty where it cannot be read)."""
+    fields: dict[str, str] = {}
     try:
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+        text = cpuinfo.read_text(encoding="utf-8")
     except OSError:
-        pass
-    return platform.processor() or "unknown"
+        return fields
+    for line in text.split("\n\n", 1)[0].splitlines():
+        key, _, value = line.partition(":")
+        fields[key.strip()] = value.strip()
+    return fields
+
+
+def cpu_model(cpuinfo: Path = CPUINFO) -> str:
+    """The CPU model name from /proc/cpuinfo (Linux), else the platform's processor string."""
+    return _cpuinfo_fields(cpuinfo).get("model name") or platform.processor() or "unknown"
+
+
+def cpu_generation(cpuinfo: Path = CPUINFO) -> str:
+    """``family F model M`` from /proc/cpuinfo: virtual machines often name only the vendor's line
+    ("AMD EPYC"), which hides the generation (family 23 model 49 is Zen 2)."""
+    fields = _cpuinfo_fields(cpuinfo)
+    if "cpu family" not in fields:
+        return "unknown"
+    return f"family {fields['cpu family']} model {fields.get('model', '?')}"
+
+
+def cpu_simd(cpuinfo: Path = CPUINFO) -> str:
+    """The widest of ``SIMD_EXTENSIONS`` the CPU reports, or "none"."""
+    flags = set(_cpuinfo_fields(cpuinfo).get("flags", "").split())
+    return next((name for name in SIMD_EXTENSIONS if name in flags), "none")
 
 
 def cpu_reference_s(repeats: int = 3) -> float:
@@ -53,7 +82,8 @@ def write_results(name: str, results: dict[str, Any]) -> Path:
 
 class MachineLoad:
     """The machine's speed and load around a benchmark: ``cpu_reference_s`` and the load average when
-    created (before) and when ``fields`` is called (after), with the CPU model and count."""
+    created (before) and when ``fields`` is called (after), with the CPU model, generation, vector
+    extension and count."""
 
     def __init__(self) -> None:
         self.reference_before_s = cpu_reference_s()
@@ -62,6 +92,8 @@ class MachineLoad:
     def fields(self) -> dict[str, Any]:
         return {
             "cpu_model": cpu_model(),
+            "cpu_generation": cpu_generation(),
+            "cpu_simd": cpu_simd(),
             "cpu_count": os.cpu_count(),
             "cpu_reference_s": {"before": self.reference_before_s, "after": cpu_reference_s()},
             "loadavg": {"before": self.load_before, "after": os.getloadavg()},
