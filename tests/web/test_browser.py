@@ -162,8 +162,8 @@ def test_ellipses_are_vertical_for_a_cylinder_light(
     open_viewer(page, served, cylinder_job.job_id)
     page.fill("#ellipse-spacing", "6")
     page.dispatch_event("#ellipse-spacing", "change")
+    page.check("#show-ellipses")  # off in a job's first view (issue 29): one click (or C) away
     page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
-    page.wait_for_timeout(200)
     shapes = page.evaluate(
         """() => [...document.querySelectorAll('#ellipse-overlay ellipse')].map((e) => {
             const box = e.getBoundingClientRect();
@@ -191,6 +191,7 @@ def test_ellipses_are_drawn_with_the_angle_convention(
 ) -> None:
     """`angle` is counter-clockwise from +x with image +y up: ℓ₁ at +45° runs up and to the right."""
     open_viewer(page, served, diagonal_cylinder_job.job_id)
+    page.check("#show-ellipses")
     page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
     directions = page.evaluate(
         """() => [...document.querySelectorAll('#ellipse-overlay ellipse')].map((e) => {

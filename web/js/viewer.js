@@ -750,6 +750,7 @@ export class ImageViewer {
     this.root.querySelector("#scale-bar").hidden = !grid.length;
     this.overlay.dataset.count = String(grid.length);
     this.overlay.dataset.shrunk = "0";
+    delete this.overlay.dataset.umPerPx;
     this.root.querySelector("#ellipse-info").hidden = !grid.length;
     const nm = this.wavelengthNm();
     const note = document.createElement("p");
