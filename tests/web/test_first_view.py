@@ -344,10 +344,29 @@ def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
     long_named_job: str,
 ) -> None:
     a, b = cylinder_job.job_id, cylinder_job_reseeded.job_id
-    # Opened straight from the address bar: the page's own start and the route both want to mount it.
-    window.goto(f"{served.base_url}/#/compare/{a}/{b}")
+    # The route changes to the pair while the page is still starting (its list of examples held back),
+    # then the start goes on: the hash change and the start both route to the pair, each while the
+    # other's images are still loading (held back until both have asked for them).
+    examples: list[Any] = []
+    images: list[Any] = []
+    window.route("**/v1/examples", lambda route: examples.append(route))
+    window.route("**/layers/rgb*", lambda route: images.append(route))
+    window.goto(f"{served.base_url}/#/jobs")
+    while not examples:
+        window.wait_for_timeout(20)
+    window.evaluate("(hash) => (window.location.hash = hash)", f"#/compare/{a}/{b}")
+    while len(images) < 2:
+        window.wait_for_timeout(20)
+    examples[0].continue_()
+    while len(images) < 4:
+        window.wait_for_timeout(20)
+    for route in images:
+        route.continue_()
+    window.unroute("**/v1/examples")
+    window.unroute("**/layers/rgb*")
     window.wait_for_function("() => Number(document.querySelector('.compare')?.dataset.ready) >= 1")
     window.wait_for_load_state("networkidle")
+    window.wait_for_function("() => document.querySelector('#gallery-examples').children.length > 0")
     window.wait_for_timeout(300)
     assert window.locator(".compare").count() == 1
     window.select_option(".compare-mode", "abs")
