@@ -1,10 +1,10 @@
-"""Issue 29 in headless Chromium, at 1400×900 and 1280×800, asserting on what a person sees: the first view
-of a job is the picture (no overlay over it), one key (C) from ellipses that stay inside their grid cells
-and the image; the job list and the compare view fit the window without horizontal scrolling; maps,
-readouts, ellipses and inspector give the same number at the same wavelength and every legend names it;
-orientation is drawn with a cyclic colour map; readouts never outlive their job or layer; the compare
-route mounts once and a failed compare leaves nothing of the previous one; Enter and Esc in a field give
-the keys back to the page.
+"""Issue 29 in headless Chromium, asserting on what a person sees. At 1400×900 and 1280×800: the first
+view of a job is the picture (no overlay over it), one key (C) from ellipses that stay inside their grid
+cells and the image; the job list and the compare view fit the window without horizontal scrolling, the
+compare statistics beside the images. At 1400×900 (independent of the window): maps, readouts, ellipses
+and inspector give the same number at the same wavelength and every legend names it; orientation is
+drawn with a cyclic colour map; readouts never outlive their job or layer; the compare route mounts once
+and a failed compare leaves nothing of the previous one; Enter and Esc in a field give the keys back.
 
 Jobs: the session's 24² cylinder-light renders (tests/web/conftest.py) and one 8² job with a 100-character
 name (1 spp). Screenshots: test-artifacts/first_view_*.png.
@@ -46,8 +46,16 @@ def long_named_job(served: Served) -> str:
 
 @pytest.fixture(params=VIEWPORTS, ids=lambda size: f"{size[0]}x{size[1]}")
 def window(request: pytest.FixtureRequest, chromium: Any, served: Served) -> Iterator[Any]:
+    """A page at each window size (for what depends on it: layout, the first view)."""
     width, height = request.param
     with token_page(chromium, served.token, width, height) as page:
+        yield page
+
+
+@pytest.fixture
+def wide(chromium: Any, served: Served) -> Iterator[Any]:
+    """A 1400×900 page (for what does not depend on the window size)."""
+    with token_page(chromium, served.token, *VIEWPORTS[0]) as page:
         yield page
 
 
@@ -215,68 +223,68 @@ def cyclic8(t: np.ndarray) -> np.ndarray:
 
 
 def test_maps_readouts_ellipses_and_inspector_agree_at_the_slider_wavelength(
-    window: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, served: Served, cylinder_job: RenderedJob
 ) -> None:
     exr = cylinder_job.exr.channels
     covered = np.argwhere(exr["coherence.weight"] > 0)
     y, x = (int(v) for v in covered[len(covered) // 2])
-    open_image(window, served, cylinder_job.job_id)
-    canvas = window.locator("#image-canvas").bounding_box()
+    open_image(wide, served, cylinder_job.job_id)
+    canvas = wide.locator("#image-canvas").bounding_box()
     scale = canvas["width"] / SIZE_PX
     info = {
         layer["name"]: layer
         for layer in served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["layers"]
     }
-    count = drawn_count(window)
-    window.select_option("#display-mode", "coherence.l1_um")
-    redrawn(window, count)
+    count = drawn_count(wide)
+    wide.select_option("#display-mode", "coherence.l1_um")
+    redrawn(wide, count)
     for band in (2, 6):
-        count = drawn_count(window)
-        window.fill("#band-slider", str(band))
-        redrawn(window, count)
-        nm = float(window.inner_text("#band-label").split()[0])
+        count = drawn_count(wide)
+        wide.fill("#band-slider", str(band))
+        redrawn(wide, count)
+        nm = float(wide.inner_text("#band-label").split()[0])
         factor = nm / 550.0
         # The map's legend names the wavelength; its ticks span p01…p99 of the stored values × λ/550 nm.
-        assert f"at {nm:.0f} nm [µm]" in window.inner_text("#legend .colourbar-title")
-        ticks = [float(t) for t in window.locator("#legend .colourbar-ticks span").all_inner_texts()]
+        assert f"at {nm:.0f} nm [µm]" in wide.inner_text("#legend .colourbar-title")
+        ticks = [float(t) for t in wide.locator("#legend .colourbar-ticks span").all_inner_texts()]
         layer = info["coherence.l1_um"]
         assert ticks[0] == pytest.approx(layer["p01"] * factor, rel=5e-3)
         assert ticks[-1] == pytest.approx(layer["p99"] * factor, rel=5e-3)
         expected = float(exr["coherence.l1_um"][y, x]) * factor
         # Hover readout, inspector and ellipse: the same ℓ₁ at the same λ.
-        window.mouse.move(canvas["x"] + (x + 0.5) * scale, canvas["y"] + (y + 0.5) * scale)
-        readout = window.inner_text("#hover-readout")
+        wide.mouse.move(canvas["x"] + (x + 0.5) * scale, canvas["y"] + (y + 0.5) * scale)
+        readout = wide.inner_text("#hover-readout")
         assert readout.startswith(f"({x}, {y}) ℓ₁ (coherence length, major) at {nm:.0f} nm: ")
         assert float(readout.rsplit(": ", 1)[1].split()[0]) == pytest.approx(expected, rel=5e-3)
-        window.mouse.click(canvas["x"] + (x + 0.5) * scale, canvas["y"] + (y + 0.5) * scale)
-        window.wait_for_function(
+        wide.mouse.click(canvas["x"] + (x + 0.5) * scale, canvas["y"] + (y + 0.5) * scale)
+        wide.wait_for_function(
             "(xy) => document.querySelector('[data-slot=\"A\"] .pixel-title').textContent"
             " === `Pixel A: (${xy[0]}, ${xy[1]})`",
             arg=[x, y],
         )
-        row = window.locator('[data-slot="A"] tr[data-key="l1_um"]')
+        row = wide.locator('[data-slot="A"] tr[data-key="l1_um"]')
         assert float(row.get_attribute("data-value")) == pytest.approx(expected, rel=1e-6)
-        assert f"at {nm:.0f} nm" in window.inner_text('[data-slot="A"] caption')
-        m_row = float(window.get_attribute('[data-slot="A"] tr[data-key="Myy"]', "data-value"))
+        assert f"at {nm:.0f} nm" in wide.inner_text('[data-slot="A"] caption')
+        m_row = float(wide.get_attribute('[data-slot="A"] tr[data-key="Myy"]', "data-value"))
         assert m_row == pytest.approx(float(exr["coherence.Myy"][y, x]) / factor**2, rel=1e-5)  # M ∝ λ⁻²
-    window.check("#show-ellipses")
-    window.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
-    first = window.locator("#ellipse-overlay ellipse").first
+    wide.check("#show-ellipses")
+    wide.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
+    first = wide.locator("#ellipse-overlay ellipse").first
     ex, ey = int(first.get_attribute("data-x")), int(first.get_attribute("data-y"))
     assert float(first.get_attribute("data-l1-um")) == pytest.approx(
         float(exr["coherence.l1_um"][ey, ex]) * factor, rel=1e-6
     )
-    assert f"λ = {nm:.0f} nm" in window.inner_text("#ellipse-legend")
-    assert f"ellipse fill: coherence area at {nm:.0f} nm" in window.inner_text("#ellipse-legend")
+    assert f"λ = {nm:.0f} nm" in wide.inner_text("#ellipse-legend")
+    assert f"ellipse fill: coherence area at {nm:.0f} nm" in wide.inner_text("#ellipse-legend")
 
 
-def test_orientation_map_is_cyclic(window: Any, served: Served, cylinder_job: RenderedJob) -> None:
+def test_orientation_map_is_cyclic(wide: Any, served: Served, cylinder_job: RenderedJob) -> None:
     """The cylinder along x makes ℓ₁ vertical at every floor pixel: angles near −90° and +90°, the same
     direction. A cyclic map shows them in one colour (viridis showed purple/yellow speckle)."""
-    open_image(window, served, cylinder_job.job_id)
-    count = drawn_count(window)
-    window.select_option("#display-mode", "coherence.angle")
-    redrawn(window, count)
+    open_image(wide, served, cylinder_job.job_id)
+    count = drawn_count(wide)
+    wide.select_option("#display-mode", "coherence.angle")
+    redrawn(wide, count)
     exr = cylinder_job.exr.channels
     covered = exr["coherence.weight"] > 0
     angle = exr["coherence.angle"].astype(np.float64)
@@ -284,60 +292,60 @@ def test_orientation_map_is_cyclic(window: Any, served: Served, cylinder_job: Re
     t = np.mod((angle + np.pi / 2) / np.pi, 1.0)
     expected = cyclic8(t)
     expected[~covered] = 40
-    shown = canvas_rgb(window)
+    shown = canvas_rgb(wide)
     assert np.abs(shown - expected).max() <= 1
     spread = shown[covered].max(axis=0) - shown[covered].min(axis=0)
     assert spread.max() <= 12, spread  # one colour for one direction
-    title = window.inner_text("#legend .colourbar-title")
+    title = wide.inner_text("#legend .colourbar-title")
     assert "cyclic" in title and "(same at every λ)" in title and "[°]" in title
-    assert window.locator("#legend .colourbar-ticks span").all_inner_texts() == [
+    assert wide.locator("#legend .colourbar-ticks span").all_inner_texts() == [
         "-90.0",
         "-45.0",
         "0.00",
         "45.0",
         "90.0",
     ]
-    assert window.is_disabled("#log-scale")
+    assert wide.is_disabled("#log-scale")
 
 
 # ---- stale state -----------------------------------------------------------------------------------------
 
 
 def test_readouts_clear_when_the_job_or_the_layer_changes(
-    window: Any, served: Served, cylinder_job: RenderedJob, diagonal_cylinder_job: RenderedJob
+    wide: Any, served: Served, cylinder_job: RenderedJob, diagonal_cylinder_job: RenderedJob
 ) -> None:
-    open_image(window, served, cylinder_job.job_id)
-    canvas = window.locator("#image-canvas").bounding_box()
+    open_image(wide, served, cylinder_job.job_id)
+    canvas = wide.locator("#image-canvas").bounding_box()
     scale = canvas["width"] / SIZE_PX
     point = (canvas["x"] + 10.5 * scale, canvas["y"] + 12.5 * scale)
-    window.mouse.move(*point)
-    assert window.inner_text("#hover-readout").startswith("(10, 12) linear R G B")
-    window.mouse.click(*point)
-    window.wait_for_selector('[data-slot="A"]:not([hidden])')
+    wide.mouse.move(*point)
+    assert wide.inner_text("#hover-readout").startswith("(10, 12) linear R G B")
+    wide.mouse.click(*point)
+    wide.wait_for_selector('[data-slot="A"]:not([hidden])')
     # Another layer (key 3): the readout of the old one goes.
-    count = drawn_count(window)
-    window.keyboard.press("3")
-    redrawn(window, count)
-    assert window.inner_text("#hover-readout") == ""
-    window.mouse.move(point[0] + 1, point[1])
-    assert window.inner_text("#hover-readout").startswith("(10, 12) ℓ₁")
+    count = drawn_count(wide)
+    wide.keyboard.press("3")
+    redrawn(wide, count)
+    assert wide.inner_text("#hover-readout") == ""
+    wide.mouse.move(point[0] + 1, point[1])
+    assert wide.inner_text("#hover-readout").startswith("(10, 12) ℓ₁")
     # Another job: nothing of the first one's readouts or inspector stays.
-    window.goto(f"{served.base_url}/#/view/{diagonal_cylinder_job.job_id}")
-    window.wait_for_function(
+    wide.goto(f"{served.base_url}/#/view/{diagonal_cylinder_job.job_id}")
+    wide.wait_for_function(
         "(id) => document.querySelector('#viewer-title').textContent.includes(id.slice(0, 8))",
         arg=diagonal_cylinder_job.job_id,
     )
-    assert window.inner_text("#hover-readout") == ""
-    assert window.locator('[data-slot="A"]').is_hidden() and window.locator('[data-slot="B"]').is_hidden()
-    assert window.locator("#spectrum-plot").is_hidden()
-    assert window.inner_text("#ellipse-info") in ("", "Hover an ellipse for its numbers.")
+    assert wide.inner_text("#hover-readout") == ""
+    assert wide.locator('[data-slot="A"]').is_hidden() and wide.locator('[data-slot="B"]').is_hidden()
+    assert wide.locator("#spectrum-plot").is_hidden()
+    assert wide.inner_text("#ellipse-info") in ("", "Hover an ellipse for its numbers.")
 
 
 # ---- compare route ---------------------------------------------------------------------------------------
 
 
 def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
-    window: Any,
+    wide: Any,
     served: Served,
     cylinder_job: RenderedJob,
     cylinder_job_reseeded: RenderedJob,
@@ -349,62 +357,62 @@ def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
     # other's images are still loading (held back until both have asked for them).
     examples: list[Any] = []
     images: list[Any] = []
-    window.route("**/v1/examples", lambda route: examples.append(route))
-    window.route("**/layers/rgb*", lambda route: images.append(route))
-    window.goto(f"{served.base_url}/#/jobs")
+    wide.route("**/v1/examples", lambda route: examples.append(route))
+    wide.route("**/layers/rgb*", lambda route: images.append(route))
+    wide.goto(f"{served.base_url}/#/jobs")
     while not examples:
-        window.wait_for_timeout(20)
-    window.evaluate("(hash) => (window.location.hash = hash)", f"#/compare/{a}/{b}")
+        wide.wait_for_timeout(20)
+    wide.evaluate("(hash) => (wide.location.hash = hash)", f"#/compare/{a}/{b}")
     while len(images) < 2:
-        window.wait_for_timeout(20)
+        wide.wait_for_timeout(20)
     examples[0].continue_()
     while len(images) < 4:
-        window.wait_for_timeout(20)
+        wide.wait_for_timeout(20)
     for route in images:
         route.continue_()
-    window.unroute("**/v1/examples")
-    window.unroute("**/layers/rgb*")
-    window.wait_for_function("() => Number(document.querySelector('.compare')?.dataset.ready) >= 1")
-    window.wait_for_load_state("networkidle")
-    window.wait_for_function("() => document.querySelector('#gallery-examples').children.length > 0")
-    window.wait_for_timeout(300)
-    assert window.locator(".compare").count() == 1
-    window.select_option(".compare-mode", "abs")
-    window.wait_for_function("() => document.querySelector('.compare-stats').dataset.mean !== undefined")
+    wide.unroute("**/v1/examples")
+    wide.unroute("**/layers/rgb*")
+    wide.wait_for_function("() => Number(document.querySelector('.compare')?.dataset.ready) >= 1")
+    wide.wait_for_load_state("networkidle")
+    wide.wait_for_function("() => document.querySelector('#gallery-examples').children.length > 0")
+    wide.wait_for_timeout(300)
+    assert wide.locator(".compare").count() == 1
+    wide.select_option(".compare-mode", "abs")
+    wide.wait_for_function("() => document.querySelector('.compare-stats').dataset.mean !== undefined")
     # A pair that cannot be compared (8² against 24²): the error, and no map or numbers of before.
-    window.goto(f"{served.base_url}/#/compare/{a}/{long_named_job}")
-    window.wait_for_function("() => !document.querySelector('#error').hidden")
-    assert "rightJobId: image is 8x8" in window.inner_text("#error")
-    assert window.locator(".compare").count() == 0
-    assert window.locator(".compare-stats").count() == 0
+    wide.goto(f"{served.base_url}/#/compare/{a}/{long_named_job}")
+    wide.wait_for_function("() => !document.querySelector('#error').hidden")
+    assert "rightJobId: image is 8x8" in wide.inner_text("#error")
+    assert wide.locator(".compare").count() == 0
+    assert wide.locator(".compare-stats").count() == 0
     # A job that does not exist: the same.
-    window.goto(f"{served.base_url}/#/compare/{a}/{'0' * 32}")
-    window.wait_for_function("() => document.querySelector('#error').textContent.includes('404')")
-    assert window.locator(".compare").count() == 0
+    wide.goto(f"{served.base_url}/#/compare/{a}/{'0' * 32}")
+    wide.wait_for_function("() => document.querySelector('#error').textContent.includes('404')")
+    assert wide.locator(".compare").count() == 0
 
 
 # ---- keys after a field ----------------------------------------------------------------------------------
 
 
 def test_shortcuts_work_after_enter_or_escape_in_a_field(
-    window: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, served: Served, cylinder_job: RenderedJob
 ) -> None:
-    open_image(window, served, cylinder_job.job_id)
-    ev = float(window.get_attribute("#image-canvas", "data-ev"))
-    count = drawn_count(window)
-    window.fill("#ev-value", f"{ev + 1:.2f}")
-    window.press("#ev-value", "Enter")
-    redrawn(window, count)
+    open_image(wide, served, cylinder_job.job_id)
+    ev = float(wide.get_attribute("#image-canvas", "data-ev"))
+    count = drawn_count(wide)
+    wide.fill("#ev-value", f"{ev + 1:.2f}")
+    wide.press("#ev-value", "Enter")
+    redrawn(wide, count)
     typed = round(ev + 1, 2)
-    assert float(window.get_attribute("#image-canvas", "data-ev")) == pytest.approx(typed, abs=1e-9)
-    window.wait_for_function("() => document.activeElement === document.body")
-    count = drawn_count(window)
-    window.keyboard.press("e")  # the page's key again: +0.5 EV
-    redrawn(window, count)
-    assert float(window.get_attribute("#image-canvas", "data-ev")) == pytest.approx(typed + 0.5, abs=1e-9)
-    window.focus("#gamma")
-    window.keyboard.press("Escape")
-    window.wait_for_function("() => document.activeElement === document.body")
-    window.keyboard.press("c")
-    window.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
-    assert window.is_checked("#show-ellipses")
+    assert float(wide.get_attribute("#image-canvas", "data-ev")) == pytest.approx(typed, abs=1e-9)
+    wide.wait_for_function("() => document.activeElement === document.body")
+    count = drawn_count(wide)
+    wide.keyboard.press("e")  # the page's key again: +0.5 EV
+    redrawn(wide, count)
+    assert float(wide.get_attribute("#image-canvas", "data-ev")) == pytest.approx(typed + 0.5, abs=1e-9)
+    wide.focus("#gamma")
+    wide.keyboard.press("Escape")
+    wide.wait_for_function("() => document.activeElement === document.body")
+    wide.keyboard.press("c")
+    wide.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
+    assert wide.is_checked("#show-ellipses")
