@@ -362,7 +362,7 @@ def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
     wide.goto(f"{served.base_url}/#/jobs")
     while not examples:
         wide.wait_for_timeout(20)
-    wide.evaluate("(hash) => (wide.location.hash = hash)", f"#/compare/{a}/{b}")
+    wide.evaluate("(hash) => (window.location.hash = hash)", f"#/compare/{a}/{b}")
     while len(images) < 2:
         wide.wait_for_timeout(20)
     examples[0].continue_()
