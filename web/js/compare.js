@@ -166,6 +166,7 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
 
   async function update(changes = {}) {
     Object.assign(options, changes);
+    $(".compare-readout").textContent = ""; // it described the previous view (the next move refills it)
     $(".compare-mode").value = options.mode;
     $(".compare-ev").value = String(options.ev);
     $(".compare-ev-value").value = Number(options.ev).toFixed(2);
