@@ -45,6 +45,8 @@ NOT_RUN_HERE = {
 LONG_RUNNING = "make serve"  # run separately: started, seen healthy, stopped with Ctrl-C
 SCRIPT_TIMEOUT_S = 300
 
+pytestmark = pytest.mark.slow  # end to end: seven CLI processes, two local renders, a second service
+
 
 def command_of(line: str) -> str:
     """A line without its trailing ``# comment`` (the documents put two spaces before one)."""
