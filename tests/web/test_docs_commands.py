@@ -43,6 +43,7 @@ NOT_RUN_HERE = {
     ".venv/bin/python -m bench.bench_api": "as make bench",
 }
 LONG_RUNNING = "make serve"  # run separately: started, seen healthy, stopped with Ctrl-C
+STARTS_SERVICE = re.compile(r"\b(hgrender|make) serve\b")  # never ends: never run inside a script
 SCRIPT_TIMEOUT_S = 300
 
 pytestmark = pytest.mark.slow  # end to end: seven CLI processes, two local renders, a second service
@@ -63,7 +64,7 @@ def runnable_script(document: str, base_url: str) -> tuple[str, list[str]]:
     for block in shell_blocks(document):
         for line in block.splitlines():
             command = command_of(line)
-            if command in NOT_RUN_HERE or command == LONG_RUNNING:
+            if command in NOT_RUN_HERE or STARTS_SERVICE.search(command):
                 left_out.append(command)
                 lines.append(f": not run here: {command}")
             else:
@@ -84,11 +85,30 @@ def fresh_clone(tmp_path_factory: pytest.TempPathFactory, served: Served) -> Pat
 
 
 def run_script(script: str, cwd: Path, served: Served) -> subprocess.CompletedProcess[str]:
+    """Run ``script`` with bash in its own process group; past SCRIPT_TIMEOUT_S the whole group is stopped
+    (SIGTERM: a service a block started shuts down its workers and Redis too), and the test fails."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("HGRENDER_") and k != "REDIS_URL"}
     env["HGRENDER_URL"] = served.base_url
-    return subprocess.run(
-        ["bash", "-c", script], cwd=cwd, env=env, capture_output=True, text=True, timeout=SCRIPT_TIMEOUT_S
+    process = subprocess.Popen(
+        ["bash", "-c", script],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
     )
+    try:
+        stdout, stderr = process.communicate(timeout=SCRIPT_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGTERM)
+        try:
+            stdout, stderr = process.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            stdout, stderr = process.communicate()
+        pytest.fail(f"the blocks ran longer than {SCRIPT_TIMEOUT_S} s: {stdout[-2000:]}{stderr[-2000:]}")
+    return subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
 
 
 def tracked_files() -> set[str] | None:
@@ -105,6 +125,9 @@ def test_the_documents_left_out_list_is_current() -> None:
         command_of(line) for doc in DOCUMENTS for block in shell_blocks(doc) for line in block.splitlines()
     }
     assert set(NOT_RUN_HERE) | {LONG_RUNNING} <= commands
+    # A command that starts a service would never end: the only one a block may hold is LONG_RUNNING.
+    servers = {c for c in commands if STARTS_SERVICE.search(c) and c != LONG_RUNNING}
+    assert not servers, f"blocks start a service; run it apart as {LONG_RUNNING!r} is: {servers}"
     tracked = tracked_files()
     if tracked is None:
         pytest.skip("not a git checkout: cannot tell tracked files")
