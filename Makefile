@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 PYTHON ?= python3
-SYSTEM_PACKAGES := libllvm19 redis-server chromium chromium-driver iproute2
+SYSTEM_PACKAGES := libllvm19 redis-server chromium chromium-driver iproute2 curl jq
 HOST ?= 127.0.0.1
 PORT ?= 8000
 DATA_DIR ?= ./data
@@ -31,8 +31,10 @@ $(VENV)/.installed: pyproject.toml
 
 venv: $(VENV)/.installed
 
+# Ctrl-C stops the service in order (hgrender serve exits 130 after a clean shutdown); that is how it is
+# meant to end, so make reports no error for it.
 serve: setup
-	$(VENV)/bin/hgrender serve --host $(HOST) --port $(PORT) --data-dir $(DATA_DIR)
+	@$(VENV)/bin/hgrender serve --host $(HOST) --port $(PORT) --data-dir $(DATA_DIR) || [ $$? -eq 130 ]
 
 lint: venv
 	$(VENV)/bin/ruff check .

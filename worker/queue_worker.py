@@ -96,6 +96,29 @@ _REDIS_BACKOFF_CAP_S = 1.0
 log = logging.getLogger(__name__)
 
 
+class MaintenanceAtDebug(logging.Filter):
+    """RQ logs its registry maintenance at INFO: four lines per ``worker_maintenance_interval_s`` (5 s by
+    default) and worker, over half of a ``serve.log``. This filter (on RQ's worker logger) re-levels them to
+    DEBUG, so they appear only where DEBUG is on; every other record passes unchanged."""
+
+    MESSAGES = frozenset(
+        {"Worker %s: cleaning registries for queue: %s", "Worker %s: cleaning group registries"}
+    )
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.msg not in self.MESSAGES:
+            return True
+        record.levelno, record.levelname = logging.DEBUG, logging.getLevelName(logging.DEBUG)
+        return logging.getLogger(record.name).isEnabledFor(logging.DEBUG)
+
+
+def quiet_rq_maintenance() -> None:
+    """Install ``MaintenanceAtDebug`` on RQ's worker logger (once per process)."""
+    rq_log = logging.getLogger("rq.worker")
+    if not any(isinstance(f, MaintenanceAtDebug) for f in rq_log.filters):
+        rq_log.addFilter(MaintenanceAtDebug())
+
+
 def die_with_parent(signum: signal.Signals, parent_pid: int) -> bool:
     """Ask Linux to send ``signum`` to this process when its parent dies (``PR_SET_PDEATHSIG``); False
     when the parent (``parent_pid``, read before the fork) is already gone."""
@@ -416,6 +439,7 @@ def run_worker(settings: Settings, *, burst: bool = False, name: str | None = No
         str(settings.redis_url), retry=Retry(ExponentialBackoff(), 0), socket_connect_timeout=1.0
     )
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    quiet_rq_maintenance()
     while True:
         wait_for_redis(probe)
         worker = build_worker(settings, client, name)

@@ -32,3 +32,7 @@ Priority = Literal["high", "normal", "low"]
 
 ChunkStatus = Literal["queued", "running", "done", "failed", "canceled"]
 """Status of one chunk (or of the merge step) in the job's chunk bookkeeping."""
+
+MERGE_PENDING_PROGRESS = 0.999
+"""An unfinished job's progress stops here: with every sample rendered its merge step is still to come
+(clients show "merging" at this value, not 100 %)."""

@@ -9,7 +9,7 @@ import time
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from hgcore.jobs.status import ChunkStatus, JobStatus, Priority
+from hgcore.jobs.status import MERGE_PENDING_PROGRESS, ChunkStatus, JobStatus, Priority
 
 
 def _float_or_none(value: str | None) -> float | None:
@@ -133,7 +133,7 @@ def build_view(record: dict[str, str], chunk_fields: dict[str, str], now: float 
     chunks_done = sum(1 for c in chunks if c.status == "done")
     progress = 1.0 if status == JobStatus.SUCCEEDED else sum(c.progress for c in chunks) / max(1, chunk_count)
     if status != JobStatus.SUCCEEDED:
-        progress = min(progress, 0.999)  # the merge step is still to come
+        progress = min(progress, MERGE_PENDING_PROGRESS)
     created_at = float(record["created_at"])
     started_at = _float_or_none(record.get("started_at"))
     finished_at = _float_or_none(record.get("finished_at"))

@@ -3,13 +3,17 @@
 On a terminal it is a tqdm bar that redraws in place and shows the job's status and chunk counts
 (``running, 2/4 chunks, eta 12 s``); without one (CI logs, pipes) it writes one line per step instead
 of carriage-return redraws: a line whenever the status or the chunks done change, or the progress
-passes another 10 %.
+passes another 10 %. Percentages are rounded down, so 100 % means done: a running job whose samples are
+all rendered (progress ``MERGE_PENDING_PROGRESS``) says ``merging`` while its merge step runs.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any, TextIO
+
+from hgcore.jobs.status import MERGE_PENDING_PROGRESS
 
 # Without a terminal, a line is written each time the progress crosses a multiple of this.
 LINE_STEP = 0.1
@@ -19,6 +23,8 @@ def describe_step(
     status: str | None, chunks_done: int | None, chunks_total: int | None, eta_s: float | None
 ) -> str:
     """``running, 2/4 chunks, eta 12 s`` (parts that are unknown are left out)."""
+    if status == "merging":
+        return "merging: all samples rendered, writing the image"
     parts = [status] if status else []
     if chunks_total:
         parts.append(f"{chunks_done or 0}/{chunks_total} chunks")
@@ -62,9 +68,12 @@ class ProgressDisplay:
         if not self.enabled:
             return
         fraction = min(max(float(fraction), 0.0), 1.0)
+        if status == "running" and fraction >= MERGE_PENDING_PROGRESS:
+            status = "merging"
         step = describe_step(status, chunks_done, chunks_total, eta_s)
+        percent = math.floor(100 * fraction)
         if self._bar is not None:
-            self._bar.n = 100 * fraction
+            self._bar.n = percent
             self._bar.unit = step
             self._bar.refresh()
             return
@@ -74,7 +83,7 @@ class ProgressDisplay:
             return
         self._last_line_key = key
         suffix = f" ({step})" if step else ""
-        print(f"{self.label}: {100 * fraction:3.0f}%{suffix}", file=self.stream, flush=True)
+        print(f"{self.label}: {percent:3d}%{suffix}", file=self.stream, flush=True)
 
     def close(self) -> None:
         if self._bar is not None:

@@ -22,7 +22,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hgcore.redis_clients import redis_client
 from hgrender.cli import CliError
 
 
@@ -198,6 +197,7 @@ class RedisSupervisor:
 def reconcile(settings: Any, confirm_after_s: float = 2.0) -> None:
     """Re-enqueue whatever the queue state lost track of (``hgcore.jobs.reconcile``), logging each."""
     from hgcore.jobs.reconcile import QueueReconciler
+    from hgcore.redis_clients import redis_client
 
     client = redis_client(settings.redis_url)
     try:
@@ -239,6 +239,7 @@ in order by ``serve_command``'s ``finally``."""
 def serve_command(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from hgcore.redis_clients import redis_client
     from hgcore.settings import Settings
     from service.auth import ensure_admin_token
     from service.main import create_app

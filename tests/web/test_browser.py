@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import itertools
+import re
 import time
 from typing import Any
 
@@ -161,8 +162,8 @@ def test_ellipses_are_vertical_for_a_cylinder_light(
     open_viewer(page, served, cylinder_job.job_id)
     page.fill("#ellipse-spacing", "6")
     page.dispatch_event("#ellipse-spacing", "change")
+    page.check("#show-ellipses")  # off in a job's first view (issue 29): one click (or C) away
     page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
-    page.wait_for_timeout(200)
     shapes = page.evaluate(
         """() => [...document.querySelectorAll('#ellipse-overlay ellipse')].map((e) => {
             const box = e.getBoundingClientRect();
@@ -190,6 +191,7 @@ def test_ellipses_are_drawn_with_the_angle_convention(
 ) -> None:
     """`angle` is counter-clockwise from +x with image +y up: ℓ₁ at +45° runs up and to the right."""
     open_viewer(page, served, diagonal_cylinder_job.job_id)
+    page.check("#show-ellipses")
     page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
     directions = page.evaluate(
         """() => [...document.querySelectorAll('#ellipse-overlay ellipse')].map((e) => {
@@ -295,7 +297,8 @@ def test_running_job_progress_bar_advances(page: Any, served: Served) -> None:
     assert len(intermediate) >= 2, values
     assert values == sorted(values)  # never goes backwards
     assert values[-1] == 1.0
-    assert "samples/s" in page.inner_text(f"{row} .job-rate")
+    assert re.fullmatch(r"[\d.]+[kMG]?", page.inner_text(f"{row} .job-rate"))  # the header says samples/s
+    assert page.get_attribute(f"{row} .job-rate", "title").endswith(" samples per second")
     screenshot(page, "jobs_done")
 
 

@@ -8,6 +8,11 @@ import pytest
 
 from schemas.gallery import GALLERY
 from tests.web.conftest import Served, screenshot
+from tests.web.test_first_view import (
+    MAX_ELLIPSE_COVERAGE,
+    assert_ellipses_inside_their_cells,
+    overlay_coverage,
+)
 
 pytestmark = pytest.mark.browser
 
@@ -51,4 +56,8 @@ def test_one_click_renders_the_cylinder_scene_and_opens_it_with_ellipses(page: A
     page.wait_for_function("() => Number(document.querySelector('#image-canvas').dataset.drawn) >= 1")
     assert page.is_checked("#show-ellipses")
     page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
+    # Issue 29: the ellipses stay inside their grid cells (auto scale) and the image, and leave most of
+    # the picture visible.
+    assert_ellipses_inside_their_cells(page)
+    assert overlay_coverage(page) <= MAX_ELLIPSE_COVERAGE
     screenshot(page, "gallery_cylinder_opened")

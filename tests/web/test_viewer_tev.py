@@ -49,6 +49,8 @@ def test_image_page_fits_1400x900_with_stats_and_colour_bar(
     wide: Any, served: Served, cylinder_job: RenderedJob
 ) -> None:
     open_image(wide, served, cylinder_job.job_id)
+    wide.check("#show-ellipses")
+    wide.wait_for_selector("#ellipse-legend canvas")
     count = drawn_count(wide)
     wide.select_option("#display-mode", "coherence.l1_um")
     redrawn(wide, count)
@@ -123,6 +125,7 @@ def test_ellipses_are_drawn_to_an_absolute_um_scale_in_every_mode(
     wide: Any, served: Served, cylinder_job: RenderedJob, diagonal_cylinder_job: RenderedJob
 ) -> None:
     open_image(wide, served, cylinder_job.job_id)
+    wide.check("#show-ellipses")
     wide.select_option("#ellipse-scale", "20")
     wide.wait_for_function("() => document.querySelector('#ellipse-overlay').dataset.umPerPx === '20'")
     nm = float(wide.inner_text("#band-label").split()[0])
@@ -158,6 +161,8 @@ def test_ellipses_are_drawn_to_an_absolute_um_scale_in_every_mode(
     screenshot(wide, "tev_ellipses_um_scale")
     # The same setting on another job: the same µm per pixel (comparable across jobs).
     open_image(wide, served, diagonal_cylinder_job.job_id)
+    wide.check("#show-ellipses")
+    wide.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
     assert wide.get_attribute("#ellipse-overlay", "data-um-per-px") == "20"
 
 

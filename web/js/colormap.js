@@ -1,5 +1,6 @@
-// False colour: viridis (a 6th-order polynomial fit of matplotlib's map, after Matt Zucker's shader) with a
-// colour bar and unit-aware tick labels. t in [0, 1] → 8-bit RGB, quantised as floor(255·v + 0.5).
+// False colour: viridis (a 6th-order polynomial fit of matplotlib's map, after Matt Zucker's shader) for
+// magnitudes, a cyclic hue wheel for orientations, a colour bar and unit-aware tick labels. t in [0, 1] →
+// 8-bit RGB, quantised as floor(255·v + 0.5).
 
 const VIRIDIS = [
   [0.2777273272234177, 0.005407344544966578, 0.3340998053353061],
@@ -21,6 +22,31 @@ export function viridis(t) {
     rgb[c] = Math.floor(Math.min(Math.max(v, 0), 1) * 255 + 0.5);
   }
   return rgb;
+}
+
+// The cyclic map: constant OKLab lightness L and chroma C, hue h = 2π·t (t = 0 and t = 1 are the same
+// colour, as −90° and +90° are the same orientation). L = 0.75, C = 0.12 stays inside the sRGB gamut at
+// every hue (min channel 0.02, max 0.96), so no hue is clipped and neighbouring angles stay distinct.
+const CYCLIC_LIGHTNESS = 0.75;
+const CYCLIC_CHROMA = 0.12;
+
+/** Cyclic colour of t (period 1) as [r, g, b] in 0..255: OKLab (Ottosson 2020) → linear sRGB → sRGB. */
+export function cyclic(t) {
+  const h = 2 * Math.PI * (Number.isFinite(t) ? t : 0);
+  const [L, a, b] = [CYCLIC_LIGHTNESS, CYCLIC_CHROMA * Math.cos(h), CYCLIC_CHROMA * Math.sin(h)];
+  const l = (L + 0.3963377774 * a + 0.2158037573 * b) ** 3;
+  const m = (L - 0.1055613458 * a - 0.0638541728 * b) ** 3;
+  const s = (L - 0.0894841775 * a - 1.291485548 * b) ** 3;
+  const linear = [
+    4.0767416621 * l - 3.3077115913 * m + 0.2309699292 * s,
+    -1.2684380046 * l + 2.6097574011 * m - 0.3413193965 * s,
+    -0.0041960863 * l - 0.7034186147 * m + 1.707614701 * s,
+  ];
+  return linear.map((v) => {
+    const c = Math.min(Math.max(v, 0), 1);
+    const encoded = c <= 0.0031308 ? 12.92 * c : 1.055 * Math.pow(c, 1 / 2.4) - 0.055;
+    return Math.floor(encoded * 255 + 0.5);
+  });
 }
 
 export const SYMLOG_DECADES = 3;
@@ -57,8 +83,12 @@ export function formatValue(value, unit = "") {
   return unit && unit !== "1" ? `${text} ${unit}` : text;
 }
 
-/** Draw a horizontal colour bar with 5 tick labels into `container` (replaces its content). */
-export function drawColourBar(container, scale, unit, title) {
+/**
+ * Draw a horizontal colour bar with 5 tick labels into `container` (replaces its content). `colour(t)` is
+ * the colour map (viridis by default); `tickValue(v)` turns a scale value into the number shown (e.g. a
+ * length stored at 550 nm into its value at the shown wavelength, radians into degrees).
+ */
+export function drawColourBar(container, scale, unit, title, { colour = viridis, tickValue = (v) => v } = {}) {
   container.replaceChildren();
   const heading = document.createElement("div");
   heading.className = "colourbar-title";
@@ -70,10 +100,10 @@ export function drawColourBar(container, scale, unit, title) {
   canvas.height = 12;
   canvas.className = "colourbar";
   canvas.setAttribute("role", "img");
-  canvas.setAttribute("aria-label", `colour bar from ${formatValue(scale.lo, unit)} to ${formatValue(scale.hi, unit)}`);
+  canvas.setAttribute("aria-label", `colour bar from ${formatValue(tickValue(scale.lo), unit)} to ${formatValue(tickValue(scale.hi), unit)}`);
   const ctx = canvas.getContext("2d");
   for (let i = 0; i < 256; i++) {
-    const [r, g, b] = viridis(i / 255);
+    const [r, g, b] = colour(i / 255);
     ctx.fillStyle = `rgb(${r},${g},${b})`;
     ctx.fillRect(i, 0, 1, 12);
   }
@@ -81,7 +111,7 @@ export function drawColourBar(container, scale, unit, title) {
   ticks.className = "colourbar-ticks";
   for (let k = 0; k <= 4; k++) {
     const tick = document.createElement("span");
-    tick.textContent = formatValue(scale.value(k / 4), "");
+    tick.textContent = formatValue(tickValue(scale.value(k / 4)), "");
     ticks.append(tick);
   }
   container.append(heading, canvas, ticks);

@@ -55,23 +55,35 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
       <label for="${id}-split">Split</label>
       <input id="${id}-split" class="compare-split" type="range" min="0" max="100" step="1" value="50">
     </div>
-    <div class="compare-names"><span class="compare-left-name"></span><span class="compare-right-name"></span></div>
-    <div class="compare-stage">
-      <canvas class="compare-left" role="img" aria-label="left image (a)"></canvas>
-      <canvas class="compare-right" role="img" aria-label="right image (b)"></canvas>
-      <div class="compare-divider" aria-hidden="true"></div>
-      <canvas class="compare-diff" role="img" aria-label="difference map" hidden></canvas>
-    </div>
-    <output class="compare-readout small" aria-live="off"></output>
-    <div class="compare-legend"></div>
-    <p class="compare-stats" aria-live="polite"></p>`;
+    <div class="compare-body">
+      <div class="compare-main">
+        <div class="compare-names"><a class="compare-left-name"></a><a class="compare-right-name"></a></div>
+        <div class="compare-stage">
+          <canvas class="compare-left" role="img" aria-label="left image (a)"></canvas>
+          <canvas class="compare-right" role="img" aria-label="right image (b)"></canvas>
+          <div class="compare-divider" aria-hidden="true"></div>
+          <canvas class="compare-diff" role="img" aria-label="difference map" hidden></canvas>
+        </div>
+      </div>
+      <div class="compare-side">
+        <div class="compare-legend"></div>
+        <p class="compare-stats" aria-live="polite"></p>
+        <output class="compare-readout small" aria-live="off"></output>
+      </div>
+    </div>`;
   element.append(root);
   const $ = (selector) => root.querySelector(selector);
-  const [left, right, catalogue] = await Promise.all([
-    api.floats(`/v1/jobs/${leftJobId}/layers/rgb?format=f32`),
-    api.floats(`/v1/jobs/${rightJobId}/layers/rgb?format=f32`),
-    api.json(`/v1/jobs/${leftJobId}/layers`),
-  ]);
+  let left, right, catalogue;
+  try {
+    [left, right, catalogue] = await Promise.all([
+      api.floats(`/v1/jobs/${leftJobId}/layers/rgb?format=f32`),
+      api.floats(`/v1/jobs/${rightJobId}/layers/rgb?format=f32`),
+      api.json(`/v1/jobs/${leftJobId}/layers`),
+    ]);
+  } catch (error) {
+    root.remove(); // nothing half-mounted stays behind
+    throw error;
+  }
   // The slider spans a's automatic exposure ± 12 EV (it always holds it); the box takes any EV.
   const autoEv = catalogue.exposure_ev;
   const options = { mode, ev: ev ?? autoEv, tonemap };
@@ -81,13 +93,20 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
     root.remove();
     throw new Error(`rightJobId: image is ${right.width}x${right.height}, left is ${left.width}x${left.height}`);
   }
-  $(".compare-left-name").textContent = `a: ${names[0] || leftJobId.slice(0, 8)}`;
-  $(".compare-right-name").textContent = `b: ${names[1] || rightJobId.slice(0, 8)}`;
+  // Each name links to its job in the image view; a long one is cut with an ellipsis (the tooltip has it).
+  for (const [selector, slot, jobId, name] of [[".compare-left-name", "a", leftJobId, names[0]], [".compare-right-name", "b", rightJobId, names[1]]]) {
+    const link = $(selector);
+    link.textContent = `${slot}: ${name || jobId.slice(0, 8)}`;
+    link.title = `${link.textContent} (${jobId}): open in the image view`;
+    link.href = `/#/view/${jobId}`;
+  }
   for (const canvas of root.querySelectorAll("canvas")) {
     canvas.width = left.width;
     canvas.height = left.height;
   }
   $(".compare-stage").style.aspectRatio = `${left.width} / ${left.height}`;
+  // The image column is as wide as the window's height allows for this aspect ratio (app.css).
+  root.style.setProperty("--compare-aspect", String(left.width / left.height));
 
   const controller = { root, stats: null, update, destroy: () => root.remove() };
   let lastDiff = null;
@@ -147,6 +166,7 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
 
   async function update(changes = {}) {
     Object.assign(options, changes);
+    $(".compare-readout").textContent = ""; // it described the previous view (the next move refills it)
     $(".compare-mode").value = options.mode;
     $(".compare-ev").value = String(options.ev);
     $(".compare-ev-value").value = Number(options.ev).toFixed(2);
@@ -170,11 +190,27 @@ export async function mountCompare(element, { leftJobId, rightJobId, api, mode =
     return controller;
   }
 
-  const report = (promise) => promise.catch((error) => ($(".compare-stats").textContent = String(error.message || error)));
+  // A failed update shows its error in place of the statistics and leaves no map or numbers of before.
+  const report = (promise) =>
+    promise.catch((error) => {
+      lastDiff = null;
+      controller.stats = null;
+      const diff = $(".compare-diff");
+      diff.getContext("2d").clearRect(0, 0, diff.width, diff.height);
+      $(".compare-legend").replaceChildren();
+      const statsNode = $(".compare-stats");
+      for (const key of ["mode", "mean", "p95", "max", "ev"]) delete statsNode.dataset[key];
+      statsNode.textContent = String(error.message || error);
+    });
   $(".compare-mode").addEventListener("change", (e) => report(update({ mode: e.target.value })));
   $(".compare-ev").addEventListener("input", (e) => report(update({ ev: Number(e.target.value) })));
   $(".compare-ev-value").addEventListener("change", (e) => report(update({ ev: Number(e.target.value) })));
   $(".compare-tonemap").addEventListener("change", (e) => report(update({ tonemap: e.target.value })));
   $(".compare-split").addEventListener("input", applySplit);
-  return update();
+  try {
+    return await update();
+  } catch (error) {
+    root.remove();
+    throw error;
+  }
 }

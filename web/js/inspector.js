@@ -2,34 +2,15 @@
 // RGB and coherence values of up to two pixels (slots A and B, marked on the image by the viewer), and
 // each pixel's spectrum as CSV. Values come from GET /v1/jobs/{id}/pixel.
 //
-// Units match the ellipse hover: lengths and area at the wavelength slider's λ (the renderer reports them
-// at 550 nm; they scale ∝ λ and ∝ λ²), angles in degrees (from image +x towards +y up).
+// Units and wavelength as everywhere in the viewer (web/js/diagnostics.js): lengths, area and M at the
+// wavelength slider's λ (the renderer reports them at 550 nm), angles in degrees.
 
 import { formatValue } from "./colormap.js";
+import { COHERENCE_QUANTITIES, displayValue } from "./diagnostics.js";
 import { drawPlot } from "./plot.js";
 
 export const SLOT_COLOURS = { A: "#fbbc04", B: "#f28b82" };
-export const REFERENCE_WAVELENGTH_NM = 550;
-// key, label, unit, power of λ/550 nm it scales with (null: not a length), or "deg" for the angle
-const COHERENCE_ROWS = [
-  ["l1_um", "ℓ₁", "µm", 1],
-  ["l2_um", "ℓ₂", "µm", 1],
-  ["angle", "angle", "°", "deg"],
-  ["anisotropy", "ℓ₁/ℓ₂", "1", 0],
-  ["area_um2", "area", "µm²", 2],
-  ["r_m", "r", "m", 0],
-  ["Mxx", "Mxx", "m⁻²", 0],
-  ["Mxy", "Mxy", "m⁻²", 0],
-  ["Myy", "Myy", "m⁻²", 0],
-];
-
-/** A coherence value in the display units at `wavelengthNm` (lengths ∝ λ, area ∝ λ², angle in °). */
-export function coherenceDisplayValue(key, value, wavelengthNm) {
-  if (value === null || value === undefined) return null;
-  const row = COHERENCE_ROWS.find(([k]) => k === key);
-  if (row[3] === "deg") return (value * 180) / Math.PI;
-  return value * Math.pow(wavelengthNm / REFERENCE_WAVELENGTH_NM, row[3]);
-}
+const COHERENCE_ROWS = ["l1_um", "l2_um", "angle", "anisotropy", "area_um2", "r_m", "Mxx", "Mxy", "Myy"];
 
 /** CSV of one pixel's spectrum: a header naming pixel, job and unit, then wavelength_nm,value rows. */
 export function spectrumCsv(jobId, pixel) {
@@ -80,6 +61,7 @@ export class PixelInspector {
     this.jobId = catalogue.job_id;
     this.unit = catalogue.layers.find((l) => l.kind === "band")?.unit || "";
     this.pixels = { A: null, B: null };
+    this.root.querySelector("#spectrum-readout").textContent = "";
     this.root.querySelector("#inspect-x").max = String(catalogue.width - 1);
     this.root.querySelector("#inspect-y").max = String(catalogue.height - 1);
     this.render();
@@ -89,7 +71,9 @@ export class PixelInspector {
   async inspect(jobId, x, y) {
     this.jobId = jobId;
     const slot = this.root.querySelector('input[name="inspect-slot"]:checked')?.value || "A";
-    this.pixels[slot] = await this.api.json(`/v1/jobs/${jobId}/pixel?x=${x}&y=${y}`);
+    const pixel = await this.api.json(`/v1/jobs/${jobId}/pixel?x=${x}&y=${y}`);
+    if (this.jobId !== jobId) return; // another job was opened meanwhile: its inspector starts empty
+    this.pixels[slot] = pixel;
     this.root.querySelector("#inspect-x").value = String(x);
     this.root.querySelector("#inspect-y").value = String(y);
     this.render();
@@ -109,12 +93,13 @@ export class PixelInspector {
     box.querySelector(".pixel-title").textContent = `Pixel ${slot}: (${pixel.x}, ${pixel.y})`;
     box.querySelector(".pixel-title").style.color = SLOT_COLOURS[slot];
     box.querySelector(".pixel-rgb").textContent = `linear RGB ${pixel.rgb.map((v) => formatValue(v)).join(", ")} ${pixel.spectrum_unit}`;
-    const rows = COHERENCE_ROWS.map(([key, label, unit]) => {
-      const value = coherenceDisplayValue(key, pixel.coherence[key], nm);
+    const rows = COHERENCE_ROWS.map((key) => {
+      const { label, unit } = COHERENCE_QUANTITIES[key];
+      const value = displayValue(key, pixel.coherence[key], nm);
       return `<tr data-key="${key}" data-value="${value ?? ""}"><th scope="row">${label}</th><td>${formatValue(value, unit)}</td></tr>`;
     });
     box.querySelector(".pixel-coherence").innerHTML = pixel.coherence_covered
-      ? `<caption>coherence at ${nm.toFixed(0)} nm (wavelength slider)</caption>${rows.join("")}`
+      ? `<caption>coherence at ${nm.toFixed(0)} nm (wavelength slider; ℓ, area and M scale with λ)</caption>${rows.join("")}`
       : "<caption>no coherence diagnostics at this pixel</caption>";
   }
 

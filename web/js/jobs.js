@@ -2,9 +2,9 @@
 // samples/s, cancel/delete; regression jobs hidden on request) and the submit form (upload a JSON/USD
 // scene or pick an example; override spp, resolution, modes, chunks).
 
-import { formatValue } from "./colormap.js";
-
 const FINAL = new Set(["succeeded", "failed", "canceled"]);
+// hgcore/jobs/views.py: an unfinished job's progress stops at 0.999 until its merge step has run.
+export const MERGING_PROGRESS = 0.999;
 const MAX_STREAMS = 4; // browsers allow ~6 HTTP/1.1 connections per host; leave room for data requests
 // service/regression/runs.py names the render jobs of a run "regression <scene> (run <id>)".
 const REGRESSION_NAME = /^regression \S+ \(run [0-9a-f]{8}\)$/;
@@ -21,6 +21,17 @@ export function formatDuration(seconds) {
   const minutes = Math.floor(seconds / 60);
   if (minutes < 60) return `${minutes} min ${Math.round(seconds % 60)} s`;
   return `${Math.floor(minutes / 60)} h ${minutes % 60} min`;
+}
+
+/** 3 significant digits with an SI prefix: 327k, 1.24M (short enough for the list's rate column). */
+export function formatSi(value) {
+  const prefixes = ["", "k", "M", "G", "T"];
+  let power = 0;
+  while (Math.abs(value) >= 999.5 && power < prefixes.length - 1) {
+    value /= 1000;
+    power += 1;
+  }
+  return `${Number(value.toPrecision(3))}${prefixes[power]}`;
 }
 
 /** Seconds the job has run (to now while running). */
@@ -192,7 +203,7 @@ export class JobsPanel {
       tr.dataset.jobId = job.id;
       tr.innerHTML = `
         <td><input type="checkbox" class="job-select"></td>
-        <td class="job-name"></td>
+        <td class="job-name"><a class="job-link"></a></td>
         <td class="job-created"></td>
         <td class="job-size"></td>
         <td class="job-spp"></td>
@@ -215,24 +226,29 @@ export class JobsPanel {
       tr.querySelector(".job-delete").addEventListener("click", () => this.remove(job.id).catch((e) => this.onError(e)));
       this.table.append(tr);
     }
-    tr.querySelector(".job-name").textContent = this.label(job);
-    tr.querySelector(".job-name").title = job.id;
+    // The name links to the job's image (as View does); a long one is cut, its tooltip has all of it.
+    const link = tr.querySelector(".job-link");
+    link.textContent = this.label(job);
+    link.href = `#/view/${job.id}`;
+    link.title = `${job.name || "job"} (${job.id}): open in the image view`;
     const created = new Date(job.timings.created_at * 1000);
-    tr.querySelector(".job-created").textContent = created.toLocaleString(undefined, { month: "short", day: "numeric", hour: "2-digit", minute: "2-digit", second: "2-digit" });
+    tr.querySelector(".job-created").textContent = created.toLocaleString(undefined, { month: "short", day: "numeric", hour: "2-digit", minute: "2-digit", second: "2-digit", hourCycle: "h23" });
     tr.querySelector(".job-created").title = created.toISOString();
     tr.querySelector(".job-size").textContent = job.width && job.height ? `${job.width}×${job.height}` : "—";
     tr.querySelector(".job-spp").textContent = String(job.spp);
     tr.querySelector(".job-eta").textContent = job.status === "running" && job.eta_s != null ? formatDuration(job.eta_s) : job.status === "queued" ? "queued" : "—";
     const status = tr.querySelector(".job-status");
     status.textContent = job.status + (job.error ? ` (${job.error})` : "");
+    status.title = status.textContent;
     status.className = `job-status status-${job.status}`;
     tr.dataset.status = job.status;
     tr.querySelector(".job-progress").value = job.progress;
-    tr.querySelector(".job-percent").textContent = `${Math.round(job.progress * 100)}%`;
+    tr.querySelector(".job-percent").textContent = progressText(job);
     const duration = jobDurationS(job);
     tr.querySelector(".job-duration").textContent = formatDuration(duration);
     const rate = samplesPerSecond(job);
-    tr.querySelector(".job-rate").textContent = rate == null ? "—" : `${formatValue(rate)} samples/s`;
+    tr.querySelector(".job-rate").textContent = rate == null ? "—" : formatSi(rate);
+    tr.querySelector(".job-rate").title = rate == null ? "" : `${Math.round(rate)} samples per second`;
     // A running job can be previewed once a chunk (a noise-target job: a round) has finished (the API
     // merges the finished chunks' partials).
     tr.querySelector(".job-view").disabled = !(job.status === "succeeded" || (job.status === "running" && previewRevision(job) > 0));
@@ -294,6 +310,13 @@ export class JobsPanel {
     this.root.querySelector("#submit-status").textContent = `submitted ${created.id}`;
     return created.id;
   }
+}
+
+/** "42%" (rounded down: 100 % only once the job succeeded), or "merging" while a running job's samples
+ * are all rendered and its merge step runs (the service caps a running job's progress at MERGING_PROGRESS). */
+export function progressText(job) {
+  if (job.status === "running" && job.progress >= MERGING_PROGRESS) return "merging";
+  return `${Math.floor(job.progress * 100)}%`;
 }
 
 /** How many previews a running job has published: its finished chunks plus its noise-target rounds (a

@@ -55,14 +55,39 @@ async function route() {
   }
   if (active === "view" && a && a !== viewer.jobId) {
     const job = jobs.jobs.get(a);
-    // A gallery scene opens in its most telling view (e.g. the cylinder light's anisotropic ellipses).
-    if (job && jobs.galleryView(job) === "ellipses") viewer.controls.ellipses.checked = true;
-    await viewer.open(a, { label: uploadedNames.get(a) ?? (job ? jobs.label(job) : undefined) });
+    // The first view is the picture; a gallery scene whose most telling view is its coherence ellipses
+    // (e.g. the cylinder light's anisotropic ones) opens with them, drawn to stay inside their grid cells.
+    const ellipses = Boolean(job && jobs.galleryView(job) === "ellipses");
+    await viewer.open(a, { label: uploadedNames.get(a) ?? (job ? jobs.label(job) : undefined), ellipses });
   }
-  if (active === "compare" && a && b) {
-    compareView?.destroy();
-    compareView = await mountCompare(document.querySelector("#compare-mount"), { leftJobId: a, rightJobId: b, api, names: [a, b].map((id) => jobs.jobs.get(id) && jobs.label(jobs.jobs.get(id))) });
+  if (active === "compare" && a && b) await showCompare(a, b);
+}
+
+let compareRequest = 0; // the latest compare asked for: an older one still loading is dropped
+
+/**
+ * Mount the compare view of a and b in place of whatever was there (a failed compare leaves nothing of
+ * the previous pair). Routes can overlap (a hash change while the page still loads): only the latest one
+ * mounts, so there is one compare view.
+ */
+async function showCompare(a, b) {
+  const request = ++compareRequest;
+  compareView?.destroy();
+  compareView = null;
+  document.querySelector("#compare-hint").hidden = false;
+  const mount = document.querySelector("#compare-mount");
+  mount.replaceChildren();
+  const names = [a, b].map((id) => jobs.jobs.get(id) && jobs.label(jobs.jobs.get(id)));
+  let view;
+  try {
+    view = await mountCompare(mount, { leftJobId: a, rightJobId: b, api, names });
+  } catch (error) {
+    if (request === compareRequest) throw error;
+    return;
   }
+  if (request !== compareRequest) return view.destroy();
+  compareView = view;
+  document.querySelector("#compare-hint").hidden = true;
 }
 
 async function start() {
@@ -84,9 +109,19 @@ async function start() {
 
 const help = document.querySelector("#help");
 document.querySelector("#help-button").addEventListener("click", () => help.showModal());
+// Keys a focused <select> keeps for itself (opening it, moving through its options).
+const SELECT_KEYS = new Set(["ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight", "Enter", " ", "Home", "End", "PageUp", "PageDown"]);
+
 document.addEventListener("keydown", (event) => {
-  const typing = event.target.closest?.("input:not([type=checkbox]):not([type=radio]):not([type=range]), select, textarea");
-  if (typing || event.ctrlKey || event.metaKey || event.altKey) return;
+  if (event.ctrlKey || event.metaKey || event.altKey) return;
+  const field = event.target.closest?.("input:not([type=checkbox]):not([type=radio]):not([type=range]), textarea");
+  if (field) {
+    // Enter commits a field (its change or its form's submit happens first) and Esc leaves it; either
+    // way the focus goes back to the page, so that the shortcuts work again at once.
+    if (event.key === "Enter" || event.key === "Escape") window.setTimeout(() => field.blur(), 0);
+    return;
+  }
+  if (event.target.tagName === "SELECT" && SELECT_KEYS.has(event.key)) return;
   if (event.key === "?") {
     event.preventDefault();
     if (help.open) help.close();

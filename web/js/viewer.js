@@ -4,21 +4,24 @@
 // drawn on the pixels at high zoom (as tev), A/B markers of the pixel inspector, and downloads.
 //
 // Pixel (x, y) counts from the top-left, y down. The diagnostics' `angle` is measured from +x towards
-// image +y UP, so on screen (SVG, y down) an ellipse's ℓ₁ axis is rotated by −angle.
+// image +y UP, so on screen (SVG, y down) an ellipse's ℓ₁ axis is rotated by −angle. Every diagnostic is
+// shown at the wavelength slider's λ, in the units of web/js/diagnostics.js (maps, readouts, ellipses and
+// inspector alike), and every readout is cleared when the job, the layer or λ changes.
 
 import { autoExposureEv, displayRgb8, luminance } from "./imaging.js";
-import { drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";
-import { coherenceDisplayValue, PixelInspector, REFERENCE_WAVELENGTH_NM, saveBlob, SLOT_COLOURS } from "./inspector.js";
+import { cyclic, drawColourBar, formatValue, makeScale, viridis } from "./colormap.js";
+import {
+  coherenceKey,
+  COHERENCE_QUANTITIES,
+  DIAGNOSTIC_MODES,
+  displayValue,
+  layerName,
+  orientationT,
+  quantityTitle,
+  REFERENCE_WAVELENGTH_NM,
+} from "./diagnostics.js";
+import { PixelInspector, saveBlob, SLOT_COLOURS } from "./inspector.js";
 import { previewRevision } from "./jobs.js";
-
-export const DIAGNOSTIC_LAYERS = [
-  ["coherence.l1_um", "ℓ₁ (coherence length, major)"],
-  ["coherence.l2_um", "ℓ₂ (coherence length, minor)"],
-  ["coherence.anisotropy", "anisotropy ℓ₁/ℓ₂"],
-  ["coherence.area_um2", "coherence area π·ℓ₁·ℓ₂"],
-  ["coherence.r_m", "propagation distance r"],
-  ["coherence.angle", "ℓ₁ orientation"],
-];
 const UNCOVERED_RGB = [40, 40, 40];
 const HISTOGRAM_BINS = 64;
 const LARGE_IMAGE_PIXELS = 1 << 20;
@@ -28,6 +31,15 @@ const EV_STEP = 0.5; // E / Shift+E
 const VALUE_ZOOM = 48; // screen pixels per image pixel from which values are drawn on the pixels
 export const UM_PER_PX_CHOICES = [0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500, 1000];
 const MIN_SEMI_AXIS_SCREEN_PX = 1.5; // thinner ellipses are drawn this wide (said in the legend)
+// "auto" ellipse scale: the 1-2-5 step at which the median ℓ₁ is this fraction of the grid spacing; an
+// ellipse whose ℓ₁ would then exceed half the spacing is drawn shrunk to it (shape and angle kept, dashed),
+// so every ellipse stays inside its grid cell and the picture stays visible under them.
+const AUTO_MEDIAN_FRACTION = 0.35;
+const AUTO_MAX_FRACTION = 0.5;
+const ELLIPSE_HINT = "Hover an ellipse for its numbers.";
+// Default grid spacing: about this many cells across the image's shorter side (an even number of pixels
+// in the slider's range), until the user moves the slider; then their spacing is kept for every image.
+const ELLIPSE_CELLS_ACROSS = 16;
 const ELLIPSE_SCALE_KEY = "hgrender.ellipseUmPerPx";
 const SCALE_BAR_TARGET_PX = 100;
 const CHANNEL_TEXT_COLOURS = ["#ff9a9a", "#9aff9a", "#9ab8ff"]; // R, G, B values on the pixels (as tev)
@@ -82,9 +94,13 @@ export class ImageViewer {
   bindControls() {
     const c = this.controls;
     const redraw = () => this.draw().catch((e) => this.onError(e));
-    c.mode.addEventListener("change", redraw);
+    c.mode.addEventListener("change", () => {
+      this.clearReadouts();
+      redraw();
+    });
     c.band.addEventListener("input", () => {
       this.updateBandLabel();
+      this.clearReadouts(); // they were at the previous λ
       redraw();
       this.drawEllipses();
       this.inspector.render();
@@ -103,7 +119,10 @@ export class ImageViewer {
     });
     for (const control of [c.offset, c.gamma, c.transfer, c.tonemap, c.logScale]) control.addEventListener("change", redraw);
     c.ellipses.addEventListener("change", () => this.loadEllipses().catch((e) => this.onError(e)));
-    c.spacing.addEventListener("change", () => this.loadEllipses().catch((e) => this.onError(e)));
+    c.spacing.addEventListener("change", () => {
+      this.spacingChosen = true;
+      this.loadEllipses().catch((e) => this.onError(e));
+    });
     c.spacing.addEventListener("input", () => (c.spacingLabel.textContent = `${c.spacing.value} px`));
     c.ellipseScale.addEventListener("change", () => {
       window.localStorage.setItem(ELLIPSE_SCALE_KEY, c.ellipseScale.value);
@@ -149,6 +168,7 @@ export class ImageViewer {
       const option = c.mode.options[Number(event.key) - 1];
       if (!option) return false;
       c.mode.value = option.value;
+      this.clearReadouts();
       redraw();
       return true;
     }
@@ -282,6 +302,7 @@ export class ImageViewer {
     // White outlines over a halo (a black copy of each ellipse under it, 1 screen px wider on each side)
     // stay visible on white, black and false-colour images alike.
     this.halo.style.strokeWidth = String(3.5 / zoom);
+    this.overlay.style.setProperty("--dash", `${4 / zoom} ${3 / zoom}`); // dashes of 4 and 3 screen px
     this.markers.style.strokeWidth = String(2 / zoom);
     this.root.querySelector("#zoom-label").textContent = `${Math.round(zoom * 100)}%`;
     if (this.ellipses?.length) this.drawEllipses(); // the thinnest axes keep a visible screen width
@@ -309,11 +330,26 @@ export class ImageViewer {
     this.root.querySelector("#viewer-hint").hidden = false;
     this.root.querySelector("#downloads").hidden = true;
     this.inspector.reset({ job_id: "", layers: [], width: 1, height: 1 });
+    this.clearReadouts();
     delete this.canvas.dataset.mode;
   }
 
-  /** Load a job's (or an uploaded image's) catalogue and RGB; reset the controls that depend on it. */
-  async open(jobId, { label } = {}) {
+  /** The hover readout and the ellipse readout describe what was under the pointer in the previous
+   * job, layer or wavelength: cleared on every change of those (the next pointer move fills them in). */
+  clearReadouts() {
+    const readout = this.root.querySelector("#hover-readout");
+    readout.textContent = "";
+    delete readout.dataset.x;
+    delete readout.dataset.y;
+    this.root.querySelector("#ellipse-info").textContent = ELLIPSE_HINT;
+  }
+
+  /**
+   * Load a job's (or an uploaded image's) catalogue and RGB; reset the controls that depend on it.
+   * `ellipses`: open with the coherence ellipses shown (a gallery scene whose telling view they are);
+   * otherwise the first view is the picture alone, the ellipses one key (C) away.
+   */
+  async open(jobId, { label, ellipses = false } = {}) {
     if (!/^[0-9a-f]{32}$/.test(jobId)) {
       this.clear("No such job");
       throw new Error(`no such job: ${jobId} (job ids are 32 hexadecimal digits)`);
@@ -321,6 +357,11 @@ export class ImageViewer {
     this.stopFollowing();
     this.jobId = jobId;
     this.layers.clear();
+    // Nothing of the previous job may be read as this one's while it loads.
+    this.ellipses = [];
+    this.controls.ellipses.checked = ellipses;
+    this.inspector.reset({ job_id: jobId, layers: [], width: 1, height: 1 });
+    this.clearReadouts();
     try {
       this.catalogue = await this.api.json(`/v1/jobs/${jobId}/layers`);
     } catch (error) {
@@ -339,13 +380,18 @@ export class ImageViewer {
       svg.setAttribute("height", height);
     }
     this.useCatalogue(this.catalogue);
+    if (!this.spacingChosen) this.setSpacing(Math.min(width, height) / ELLIPSE_CELLS_ACROSS);
     const band = this.controls.band;
     band.max = String(Math.max(this.bandNames.length - 1, 0));
-    band.value = String(Math.floor(this.bandNames.length / 2));
+    // The band nearest 550 nm, where the renderer reports the diagnostics: the first readouts are the
+    // stored values (those of the diagnostics EXR and of tev).
+    band.value = String(nearestIndex(this.bandNames.map((name) => this.info.get(name).wavelength_nm), REFERENCE_WAVELENGTH_NM));
     this.updateBandLabel();
     const mode = this.controls.mode;
     mode.replaceChildren(new Option("1 · sRGB (from the spectrum)", "srgb"), new Option("2 · single band (false colour)", "band"));
-    for (const [name, text] of DIAGNOSTIC_LAYERS) if (this.info.has(name)) mode.append(new Option(`${mode.options.length + 1} · ${text}`, name));
+    for (const key of DIAGNOSTIC_MODES) {
+      if (this.info.has(layerName(key))) mode.append(new Option(`${mode.options.length + 1} · ${COHERENCE_QUANTITIES[key].title}`, layerName(key)));
+    }
     this.root.querySelector("#viewer-title").textContent = this.catalogue.uploaded ? `Local file ${label || ""}`.trim() : `Job ${label || jobId}`;
     this.root.querySelector("#viewer-hint").hidden = true;
     this.describe();
@@ -459,12 +505,13 @@ export class ImageViewer {
     return name ? this.info.get(name).wavelength_nm : REFERENCE_WAVELENGTH_NM;
   }
 
-  /** The layer shown now: name, values, unit and channel count (rgb: 3). */
+  /** The layer shown now: name, display unit, channel count (rgb: 3) and coherence key (null if none). */
   currentLayer() {
     const mode = this.controls.mode.value;
-    if (mode === "srgb") return { name: "rgb", unit: this.info.get("rgb")?.unit ?? "", channels: 3 };
+    if (mode === "srgb") return { name: "rgb", unit: this.info.get("rgb")?.unit ?? "", channels: 3, key: null };
     const name = mode === "band" ? this.bandNames[Number(this.controls.band.value)] : mode;
-    return { name, unit: this.info.get(name).unit, channels: 1 };
+    const key = coherenceKey(name);
+    return { name, unit: key ? COHERENCE_QUANTITIES[key].unit : this.info.get(name).unit, channels: 1, key };
   }
 
   // ---- drawing -------------------------------------------------------------------------------------
@@ -493,22 +540,33 @@ export class ImageViewer {
       legend.textContent = `sRGB display: ${ev.toFixed(1)} EV, offset ${options.offset}, ${operator}, ${transfer}`;
       this.drawHistogram(histogramValues, HISTOGRAM_EV_RANGE, "log₂ luminance (EV, 0 = white)");
     } else {
-      const name = mode === "band" ? this.bandNames[Number(this.controls.band.value)] : mode;
+      const { name, unit, key } = this.currentLayer();
       const info = this.info.get(name);
       const values = await this.layer(name);
       const covered = info.kind === "coherence" ? await this.layer("coherence.weight") : null;
-      const scale = makeScale(info.p01 ?? 0, info.p99 ?? 1, this.controls.logScale.checked);
+      // An orientation is cyclic: a fixed [−90°, 90°] range on a colour wheel, never a log scale.
+      const orientation = key === "angle";
+      this.controls.logScale.disabled = orientation;
+      const scale = orientation ? makeScale(-Math.PI / 2, Math.PI / 2) : makeScale(info.p01 ?? 0, info.p99 ?? 1, this.controls.logScale.checked);
+      const colourOf = orientation ? (v) => cyclic(orientationT(v)) : (v) => viridis(scale.t(v));
       histogramValues = [];
       for (let i = 0; i < values.length; i++) {
-        const rgb = covered && !(covered[i] > 0) ? UNCOVERED_RGB : viridis(scale.t(values[i]));
-        if (!covered || covered[i] > 0) histogramValues.push(scale.t(values[i]));
+        const rgb = covered && !(covered[i] > 0) ? UNCOVERED_RGB : colourOf(values[i]);
+        if (!covered || covered[i] > 0) histogramValues.push(orientation ? orientationT(values[i]) : scale.t(values[i]));
         image.data[4 * i] = rgb[0];
         image.data[4 * i + 1] = rgb[1];
         image.data[4 * i + 2] = rgb[2];
         image.data[4 * i + 3] = 255;
       }
-      const title = mode === "band" ? `band ${info.wavelength_nm.toFixed(1)} nm` : this.controls.mode.selectedOptions[0].textContent.replace(/^\d · /, "");
-      drawColourBar(legend, scale, info.unit, title);
+      // The colour scale is of the stored (550 nm) values; its ticks, like every readout, are at the
+      // slider's λ. Scaling values and bounds alike leaves each pixel's colour as it is.
+      const nm = this.wavelengthNm();
+      const title = key ? quantityTitle(key, nm) : `band ${info.wavelength_nm.toFixed(1)} nm`;
+      drawColourBar(legend, scale, unit, title, {
+        colour: orientation ? cyclic : viridis,
+        tickValue: key ? (v) => displayValue(key, v, nm) : undefined,
+      });
+      if (orientation) legend.querySelector(".colourbar-title").textContent += " — cyclic: −90° and +90° are the same direction";
       this.drawHistogram(histogramValues, [0, 1], "colour-bar position");
     }
     this.canvas.getContext("2d").putImageData(image, 0, 0);
@@ -552,9 +610,10 @@ export class ImageViewer {
     const i = y * this.catalogue.width + x;
     const unit = withUnit ? layer.unit : "";
     if (layer.channels === 3) return [0, 1, 2].map((c) => formatValue(data[3 * i + c])).join(" ") + (unit ? ` ${unit}` : "");
+    if (!layer.key) return formatValue(data[i], unit);
     const weight = this.layers.get("coherence.weight");
-    if (layer.name.startsWith("coherence.") && weight && !(weight[i] > 0)) return "no diagnostics";
-    return formatValue(data[i], unit);
+    if (weight && !(weight[i] > 0)) return "no diagnostics";
+    return formatValue(displayValue(layer.key, data[i], this.wavelengthNm()), unit);
   }
 
   showHover(clientX, clientY) {
@@ -565,7 +624,7 @@ export class ImageViewer {
       return;
     }
     const layer = this.currentLayer();
-    const name = layer.name === "rgb" ? "linear R G B" : layer.name;
+    const name = layer.name === "rgb" ? "linear R G B" : layer.key ? quantityTitle(layer.key, this.wavelengthNm()) : layer.name;
     readout.textContent = `(${pixel.x}, ${pixel.y}) ${name}: ${this.valueText(pixel.x, pixel.y)}`;
     readout.dataset.x = String(pixel.x);
     readout.dataset.y = String(pixel.y);
@@ -633,26 +692,55 @@ export class ImageViewer {
 
   async loadEllipses() {
     this.ellipses = [];
-    if (this.jobId && this.controls.ellipses.checked) {
-      const grid = await this.api.json(`/v1/jobs/${this.jobId}/ellipses?spacing=${this.controls.spacing.value}`);
+    const jobId = this.jobId;
+    if (jobId && this.controls.ellipses.checked) {
+      const grid = await this.api.json(`/v1/jobs/${jobId}/ellipses?spacing=${this.controls.spacing.value}`);
+      if (this.jobId !== jobId || !this.controls.ellipses.checked) return; // another job, or switched off
       this.ellipses = grid.ellipses;
     }
     this.drawEllipses();
   }
 
+  /** Grid spacing of the ellipses: the even number of pixels nearest `px` within the slider's range. */
+  setSpacing(px) {
+    const c = this.controls;
+    const even = 2 * Math.round(px / 2);
+    c.spacing.value = String(Math.min(Math.max(even, Number(c.spacing.min)), Number(c.spacing.max)));
+    c.spacingLabel.textContent = `${c.spacing.value} px`;
+  }
+
+  /** Is the ellipse scale "auto" (chosen per image, with the largest ellipses kept inside their cell)? */
+  autoScale() {
+    return this.controls.ellipseScale.value === "auto";
+  }
+
   /**
    * µm per image pixel of the ellipses: the chosen fixed value (kept across jobs, so they compare), or
-   * "auto": the 1-2-5 value at which the median ℓ₁ at 550 nm is 0.45 of the grid spacing.
+   * "auto": the 1-2-5 value at which the median ℓ₁ at the slider's λ is AUTO_MEDIAN_FRACTION of the grid
+   * spacing.
    */
   umPerPx() {
-    const chosen = this.controls.ellipseScale.value;
-    if (chosen !== "auto") return Number(chosen);
-    const l1 = this.ellipses.map((e) => e.l1_um).sort((a, b) => a - b);
-    const target = l1[Math.floor(l1.length / 2)] / (0.45 * Number(this.controls.spacing.value));
+    if (!this.autoScale()) return Number(this.controls.ellipseScale.value);
+    const factor = this.wavelengthNm() / REFERENCE_WAVELENGTH_NM;
+    const l1 = this.ellipses.map((e) => e.l1_um * factor).sort((a, b) => a - b);
+    const target = l1[Math.floor(l1.length / 2)] / (AUTO_MEDIAN_FRACTION * Number(this.controls.spacing.value));
     return UM_PER_PX_CHOICES.find((v) => v >= target) ?? UM_PER_PX_CHOICES[UM_PER_PX_CHOICES.length - 1];
   }
 
-  /** Ellipses: semi-axes ℓ₁(λ), ℓ₂(λ) in µm at the slider's λ, drawn at `umPerPx`; rotated by −angle. */
+  /** What the ellipses show, said whether they are drawn or not (`state`: on/off and the key). */
+  ellipseExplanation(nm, state) {
+    return (
+      `Coherence ellipses (${state}): at each grid point, the patch over which the light reaching that pixel ` +
+      `stays coherent (|μ| ≥ 1/√e); semi-axes ℓ₁ ≥ ℓ₂ at λ = ${nm.toFixed(0)} nm (the wavelength slider; ` +
+      `reported at 550 nm, ∝ λ).`
+    );
+  }
+
+  /**
+   * Ellipses: semi-axes ℓ₁(λ), ℓ₂(λ) in µm at the slider's λ, drawn at `umPerPx`; rotated by −angle;
+   * clipped to the image. With the auto scale an ellipse longer than AUTO_MAX_FRACTION of the grid spacing
+   * is shrunk to it, both axes alike, and drawn dashed (the legend says how many).
+   */
   drawEllipses() {
     this.overlay.replaceChildren();
     this.halo.replaceChildren();
@@ -661,33 +749,44 @@ export class ImageViewer {
     const grid = this.ellipses || [];
     this.root.querySelector("#scale-bar").hidden = !grid.length;
     this.overlay.dataset.count = String(grid.length);
-    if (!grid.length) return;
+    this.overlay.dataset.shrunk = "0";
+    delete this.overlay.dataset.umPerPx;
+    this.root.querySelector("#ellipse-info").hidden = !grid.length;
     const nm = this.wavelengthNm();
+    const note = document.createElement("p");
+    note.className = "small ellipse-scale-note";
+    if (!grid.length) {
+      const state = this.controls.ellipses.checked ? "none: no grid point has diagnostics" : "off: press C to draw them";
+      if (this.info?.has("coherence.l1_um")) note.textContent = this.ellipseExplanation(nm, state);
+      legend.append(note);
+      return;
+    }
     const lambdaFactor = nm / REFERENCE_WAVELENGTH_NM;
     const umPerPx = this.umPerPx();
     this.overlay.dataset.umPerPx = String(umPerPx);
     const minRadius = MIN_SEMI_AXIS_SCREEN_PX / this.state.zoom;
-    const radius = (lengthUm) => Math.max((lengthUm * lambdaFactor) / umPerPx, minRadius);
+    const maxRadius = this.autoScale() ? AUTO_MAX_FRACTION * Number(this.controls.spacing.value) : Infinity;
     const areas = grid.map((e) => e.area_um2);
     const areaScale = makeScale(Math.min(...areas), Math.max(...areas), true);
     const legendScale = makeScale(areaScale.lo * lambdaFactor ** 2, areaScale.hi * lambdaFactor ** 2, true);
     drawColourBar(legend, legendScale, "µm²", `ellipse fill: coherence area at ${nm.toFixed(0)} nm`);
-    const note = document.createElement("p");
-    note.className = "small ellipse-scale-note";
-    note.textContent = `Ellipses: ℓ₁, ℓ₂ at λ = ${nm.toFixed(0)} nm (wavelength slider; reported at 550 nm, ∝ λ), 1 image px = ${umPerPx} µm; semi-axes under ${MIN_SEMI_AXIS_SCREEN_PX} screen px drawn at ${MIN_SEMI_AXIS_SCREEN_PX} px.`;
-    legend.append(note);
     const ns = "http://www.w3.org/2000/svg";
+    let shrunk = 0;
     for (const e of grid) {
       const cx = e.x + 0.5;
       const cy = e.y + 0.5;
+      const major = (e.l1_um * lambdaFactor) / umPerPx;
+      const shrink = major > maxRadius ? maxRadius / major : 1;
+      if (shrink < 1) shrunk += 1;
       const shape = document.createElementNS(ns, "ellipse");
       const [r, g, b] = viridis(areaScale.t(e.area_um2));
       shape.setAttribute("cx", cx);
       shape.setAttribute("cy", cy);
-      shape.setAttribute("rx", radius(e.l1_um));
-      shape.setAttribute("ry", radius(e.l2_um));
+      shape.setAttribute("rx", Math.max(major * shrink, minRadius));
+      shape.setAttribute("ry", Math.max(((e.l2_um * lambdaFactor) / umPerPx) * shrink, minRadius));
       shape.setAttribute("transform", `rotate(${(-e.angle * 180) / Math.PI} ${cx} ${cy})`);
       shape.setAttribute("fill", `rgb(${r},${g},${b})`);
+      if (shrink < 1) shape.classList.add("shrunk");
       Object.assign(shape.dataset, {
         x: e.x,
         y: e.y,
@@ -695,6 +794,7 @@ export class ImageViewer {
         l2Um: e.l2_um * lambdaFactor,
         angle: e.angle,
         areaUm2: e.area_um2 * lambdaFactor * lambdaFactor,
+        shrink,
       });
       const halo = shape.cloneNode();
       for (const attribute of ["fill", "stroke"]) halo.removeAttribute(attribute);
@@ -704,6 +804,11 @@ export class ImageViewer {
       shape.append(title);
       this.overlay.append(shape);
     }
+    this.overlay.dataset.shrunk = String(shrunk);
+    const scaleText = `${this.autoScale() ? "Auto scale: " : ""}1 image px = ${umPerPx} µm`;
+    const shrunkText = shrunk ? ` ${shrunk} of ${grid.length} would outgrow their grid cell: dashed, shrunk to it (shape kept; hover for the true size).` : "";
+    note.textContent = `${this.ellipseExplanation(nm, "C hides them")} ${scaleText}; clipped to the image; semi-axes under ${MIN_SEMI_AXIS_SCREEN_PX} screen px drawn ${MIN_SEMI_AXIS_SCREEN_PX} px wide.${shrunkText}`;
+    legend.append(note);
     this.drawScaleBar();
   }
 
@@ -745,9 +850,18 @@ export class ImageViewer {
 }
 
 export function ellipseText(d, wavelengthNm) {
-  const degrees = coherenceDisplayValue("angle", Number(d.angle), wavelengthNm);
+  const degrees = displayValue("angle", Number(d.angle), wavelengthNm);
   return (
     `pixel (${d.x}, ${d.y}) at ${wavelengthNm.toFixed(0)} nm: ℓ₁ ${formatValue(Number(d.l1Um), "µm")}, ` +
     `ℓ₂ ${formatValue(Number(d.l2Um), "µm")}, angle ${degrees.toFixed(1)}°, area ${formatValue(Number(d.areaUm2), "µm²")}`
   );
+}
+
+/** Index of the value nearest `target` (0 for an empty list). */
+function nearestIndex(values, target) {
+  let best = 0;
+  values.forEach((v, i) => {
+    if (Math.abs(v - target) < Math.abs(values[best] - target)) best = i;
+  });
+  return best;
 }
