@@ -27,7 +27,11 @@ incoherent source whose extent is the part of that surface that is lit and seen 
 Cittert–Zernike, docs/physics.md §7). Its points are mutually incoherent, so each path, which reaches one
 point of it, carries a point source (Σ⊥ = 0, phase along the sampled direction); averaging the paths
 gives the partially coherent response of the whole lit patch. A material's explicit
-``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane.
+``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane. The
+environment (light from infinity in every direction, reached by rays that leave the scene) is treated the
+same way: a plane wave from the path's direction per path, van Cittert–Zernike over the paths (docs/physics.md
+§9). Textured material parameters are read at each vertex before its branches (``VertexSpectra``), so the
+coherence maths sees their local values (a film's local thickness sets its shear and phase).
 
 Diagnostics (BRIEF): M = (k/r)²Σ⊥ at λ = 550 nm of the light incident at the first non-specular vertex,
 luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, light
