@@ -287,8 +287,8 @@ class FirstHit:
     depth_m: mi.Float = field(default_factory=lambda: mi.Float(0.0))  # from the centre of projection
     normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
-    # its albedo where textures vary it (else the material's, from ``material`` after the loop)
-    albedo: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(0.0))
+    # its texture coordinates (kept where textures vary the albedo; read after the loop)
+    uv: mi.Point2f = field(default_factory=lambda: mi.Point2f(0.0))
 
 
 class Vertex(NamedTuple):
@@ -800,7 +800,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             aov.normal = dr.select(first_hit, si.sh_frame.n, aov.normal)
             aov.material = dr.select(first_hit, material, aov.material)
             if kernels.textured:
-                aov.albedo = dr.select(first_hit, kernels.albedo(material, wavelengths, spectra), aov.albedo)
+                aov.uv = dr.select(first_hit, si.uv, aov.uv)
 
             # ---------------------- Shading frame (two-sided except transmitting interfaces) ------
             frame = mi.Frame3f(si.sh_frame)
@@ -964,7 +964,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             self._camera_coordinates(sums.vcz_direct_direction),
             aov.depth_m,
             aov.normal,
-            aov.albedo if kernels.textured else kernels.albedo(aov.material, wavelengths),
+            kernels.textured_albedo(aov.material, wavelengths, aov.uv)
+            if kernels.textured
+            else kernels.albedo(aov.material, wavelengths),
         )
 
 

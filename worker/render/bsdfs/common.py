@@ -141,9 +141,11 @@ class MaterialParams:
     def param(self, material: mi.UInt32, offset: int) -> mi.Float:
         return dr.gather(mi.Float, self.table, material * mat.STRIDE + offset)
 
-    def spectrum(self, material: mi.UInt32, offset: int, wavelengths: mi.Spectrum) -> mi.Spectrum:
+    def spectrum(
+        self, material: mi.UInt32, offset: int, wavelengths: mi.Spectrum, active: mi.Bool | bool = True
+    ) -> mi.Spectrum:
         spectrum_id = mi.UInt32(self.param(material, offset))
-        return lookup(mi, self.spectra, spectrum_id, wavelengths)
+        return lookup(mi, self.spectra, spectrum_id, wavelengths, active)
 
     def kind(self, material: mi.UInt32) -> mi.UInt32:
         return mi.UInt32(self.param(material, mat.KIND))
@@ -218,9 +220,12 @@ class VertexSpectra:
         self._looked_up = {offset: self._spectrum(offset) for offset in offsets}
 
     def _spectrum(self, offset: int) -> mi.Spectrum:
-        value = self.params.spectrum(self.material, offset, self.wavelengths)
         textured = self._textured.get(offset)
-        return value if textured is None else dr.select(textured[0], textured[1], value)
+        if textured is None:
+            return self.params.spectrum(self.material, offset, self.wavelengths)
+        # the table's spectrum only where the material has no texture (its gathers skip the other lanes)
+        value = self.params.spectrum(self.material, offset, self.wavelengths, ~textured[0])
+        return dr.select(textured[0], textured[1], value)
 
     def __getitem__(self, offset: int) -> mi.Spectrum:
         value = self._looked_up.get(offset)

@@ -136,6 +136,12 @@ class MaterialKernels:
         valid = True if si is None else si.is_valid()
         return VertexSpectra(self.params, material, wavelengths, self.spectrum_offsets, uv, valid)
 
+    def textured_albedo(self, material: mi.UInt32, wavelengths: mi.Spectrum, uv: mi.Point2f) -> mi.Spectrum:
+        """The albedo AOV (``albedo``) of ``material`` at texture coordinates ``uv`` (a textured scene's
+        first hit, kept by the path), its textures read once per path after the loop."""
+        spectra = VertexSpectra(self.params, material, wavelengths, (), uv)
+        return self.albedo(material, wavelengths, spectra)
+
     def albedo(
         self, material: mi.UInt32, wavelengths: mi.Spectrum, spectra: VertexSpectra | None = None
     ) -> mi.Spectrum:
