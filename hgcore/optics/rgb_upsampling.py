@@ -60,7 +60,7 @@ def sigmoid_polynomial(coefficients: tuple[Any, Any, Any], wavelength_nm: Any, o
     """S(λ) = ½ + ½x/√(1 + x²), x = (c₀λ + c₁)λ + c₂ (λ in nm): a reflectance in (0, 1)."""
     c0, c1, c2 = coefficients
     x = (c0 * wavelength_nm + c1) * wavelength_nm + c2
-    return 0.5 + 0.5 * x / ops.sqrt(1.0 + x * x)
+    return 0.5 + 0.5 * x * ops.rsqrt(1.0 + x * x)
 
 
 @functools.cache

@@ -27,9 +27,9 @@ from hgcore.optics.spectra import cie_cmf, cie_illuminant
 
 @pytest.fixture(scope="module")
 def table() -> CoefficientTable:
-    spec = importlib.util.find_spec("mitsuba")  # Mitsuba ships the table; it is not imported here
-    assert spec is not None and spec.submodule_search_locations
-    return CoefficientTable.from_file(Path(spec.submodule_search_locations[0]) / "data" / "srgb.coeff")
+    spec = importlib.util.find_spec("mitsuba")  # Mitsuba ships the table (not imported for it here)
+    assert spec is not None and spec.origin is not None  # (once imported, its alias module's origin)
+    return CoefficientTable.from_file(Path(spec.origin).parent / "data" / "srgb.coeff")
 
 
 def rgb_at_1nm(coefficients: np.ndarray) -> np.ndarray:

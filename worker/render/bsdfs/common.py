@@ -209,15 +209,33 @@ class VertexSpectra:
         self._textured: dict[int, tuple[mi.Bool, mi.Float | mi.Spectrum]] = {}
         if uv is not None:
             for offset in sorted(params.textured):
-                binding = params.param(material, mat.TEXTURE_BINDINGS[offset])
-                has_texture = active & (binding > 0.5)
-                index = mi.UInt32(dr.maximum(binding - 1.0, 0.0))
-                if offset in mat.COLOUR_PARAMETERS:
-                    value = params.textures.reflectance(index, uv, wavelengths, has_texture)
-                else:
-                    value = params.textures.scalar(index, uv, has_texture)
-                self._textured[offset] = (has_texture, value)
+                self._textured[offset] = self._texture(offset, uv, active)
         self._looked_up = {offset: self._spectrum(offset) for offset in offsets}
+
+    def _texture(
+        self, offset: int, uv: mi.Point2f, active: mi.Bool | bool
+    ) -> tuple[mi.Bool, mi.Float | mi.Spectrum]:
+        """(the lanes whose material has a texture for parameter ``offset``, its value there at ``uv``)."""
+        params, wavelengths = self.params, self.wavelengths
+        binding = params.param(self.material, mat.TEXTURE_BINDINGS[offset])
+        has_texture = active & (binding > 0.5)
+        index = mi.UInt32(dr.maximum(binding - 1.0, 0.0))
+        colour = offset in mat.COLOUR_PARAMETERS
+
+        def look_up(_: mi.Float | mi.Spectrum) -> tuple[mi.Float | mi.Spectrum]:
+            if colour:
+                return (params.textures.reflectance(index, uv, wavelengths, has_texture),)
+            return (params.textures.scalar(index, uv, has_texture),)
+
+        # A symbolic branch: packets without a lane of a textured material skip the lookup.
+        (value,) = dr.if_stmt(
+            (mi.Spectrum(0.0) if colour else mi.Float(0.0),),
+            has_texture,
+            look_up,
+            lambda kept: (kept,),
+            label=f"texture_{offset}",
+        )
+        return has_texture, value
 
     def _spectrum(self, offset: int) -> mi.Spectrum:
         textured = self._textured.get(offset)
