@@ -35,19 +35,6 @@ SEEDS = 24
 RADIUS_M, DISTANCE_M, FOV_DEG = 0.5, 2.2, 30.0
 
 
-def sky(width: int = 256, height: int = 128) -> np.ndarray:
-    rows = (np.arange(height) + 0.5) / height
-    elevation = (0.5 - rows) * math.pi
-    colour = np.where(
-        elevation[:, None, None] > 0.0,
-        np.array([0.35, 0.5, 0.9]) + 0.5 * (1.0 - np.sin(elevation))[:, None, None],
-        np.array([0.25, 0.18, 0.1]),
-    )
-    image = np.broadcast_to(colour, (height, width, 3)).copy()
-    image[40:44, 80:88] = [400.0, 360.0, 300.0]
-    return image.astype(np.float32)
-
-
 def scene() -> dict[str, Any]:
     return {
         "schema": "hgrender/scene/v1",
@@ -81,13 +68,14 @@ def _summary(renders: np.ndarray, mask: np.ndarray) -> dict[str, float]:
 def main() -> dict[str, Any]:
     import OpenImageIO as oiio
 
+    from tests.render.images import sky_image
     from tests.render.reference import band_box_specfilm
 
     load = MachineLoad()
     mi = load_mitsuba()
     with tempfile.TemporaryDirectory(prefix="hgrender-bench-environment-") as tmp:
         folder = Path(tmp)
-        image = sky()
+        image = sky_image(256, 128, (slice(40, 44), slice(80, 88)), (400.0, 360.0, 300.0))
         output = oiio.ImageOutput.create(str(folder / "sky.exr"))
         output.open(str(folder / "sky.exr"), oiio.ImageSpec(image.shape[1], image.shape[0], 3, "float"))
         output.write_image(image)

@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hgcore.settings import SceneLimits
-from schemas.bundle import resolve_bundle_file
 from schemas.errors import SceneError, json_pointer
 from schemas.scene import EnvironmentEmitter, ImageTexture, Scene
 
@@ -62,6 +61,13 @@ def image_references(scene: Scene) -> Iterator[ImageReference]:
             yield ImageReference(json_pointer(["emitters", index]), emitter.path)
 
 
+def require_no_images(scene: Scene, reason: str) -> None:
+    """A SceneError at the first image the scene names, saying ``reason`` (a scene that comes without its
+    bundle cannot read files: JSON bodies and JSON files over HTTP)."""
+    for reference in image_references(scene):
+        raise SceneError.at(f"{reference.pointer}/path", f"image {reference.path!r}: {reason}")
+
+
 def read_image_header(path: Path, where: str) -> ImageHeader:
     """The header of the image file at ``path`` (OpenImageIO reads the spec only); a SceneError at
     ``where`` naming the file if it cannot be read as an image."""
@@ -84,6 +90,8 @@ def check_image(
     bundle_dir: Path, relative_path: str, limits: SceneLimits, where: str
 ) -> tuple[Path, ImageHeader]:
     """The image file at ``relative_path`` (confined to the bundle) and its header, within the size limits."""
+    from schemas.bundle import resolve_bundle_file  # (USD's libraries: only where a bundle is read)
+
     path = resolve_bundle_file(bundle_dir, relative_path, where)
     size_bytes = path.stat().st_size
     if size_bytes > limits.max_file_bytes:

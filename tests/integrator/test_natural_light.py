@@ -27,7 +27,7 @@ from schemas.photometry import emitter_radiance_scale, evaluate_spectrum
 from schemas.validation import validate_scene
 from tests.integrator.test_frozen_passes import assert_bitwise_equal, sums_of
 from tests.render.exr import read_channels, spectral_stack
-from tests.render.images import write_image
+from tests.render.images import sky_image, write_image
 from tests.render.reference import image_mean_with_error, path_band_means
 from worker.mitsuba_setup import load_mitsuba
 from worker.render.api import render_scene
@@ -107,26 +107,15 @@ def test_an_overcast_sky_gives_a_coherence_of_the_order_of_the_wavelength(
     assert 0.17 < length_um < 0.18  # 2/k = λ/π at 550 nm
 
 
-def sky_image() -> np.ndarray:
-    """A 64 × 32 lat-long HDR sky: a blue-to-white gradient above the horizon, brown ground, and a warm
-    patch of 4 × 2 texels 30° above the horizon 60 times brighter than the sky."""
-    height, width = 32, 64
-    rows = (np.arange(height) + 0.5) / height  # 0 at the zenith
-    elevation = (0.5 - rows) * math.pi
-    sky = np.where(
-        elevation[:, None, None] > 0.0,
-        np.array([0.35, 0.5, 0.9]) + 0.5 * (1.0 - np.sin(elevation))[:, None, None],
-        np.array([0.25, 0.18, 0.1]),
-    )
-    image = np.broadcast_to(sky, (height, width, 3)).copy()
-    image[9:11, 20:24] = [60.0, 45.0, 30.0]
-    return image.astype(np.float32)
+def sky() -> np.ndarray:
+    """A 64 × 32 sky whose patch of 4 × 2 texels 30° above the horizon is 60 times brighter than the sky."""
+    return sky_image(64, 32, (slice(9, 11), slice(20, 24)), (60.0, 45.0, 30.0))
 
 
 def test_an_hdr_environment_agrees_with_mitsubas_path_on_a_diffuse_sphere(tmp_path: Path) -> None:
     # Both estimate the same per-band image means; |Δ| ≤ 3·√(SE_hg² + SE_path²) per band (as
     # tests/render/test_reference_path.py: the chance that one of 8 bands lies beyond 3σ is ≈ 2 %).
-    write_image(tmp_path / "sky.exr", sky_image())
+    write_image(tmp_path / "sky.exr", sky())
     emitter = {"type": "environment", "path": "sky.exr", "radiance_scale": 0.8,
                "transform": {"rotate_axis": [0, 1, 0], "rotate_deg": 35.0}}  # fmt: skip
     scene = sphere_scene(emitter, size_px=24, spp=256)
@@ -202,7 +191,7 @@ def test_the_sun_has_the_coherence_of_a_uniform_disk_and_its_irradiance(tmp_path
 
 def test_passes_with_textures_an_environment_and_a_sun_replay_bitwise(tmp_path: Path) -> None:
     # Frozen passes must name every array their kernels read: the texture tables and Mitsuba's envmap.
-    write_image(tmp_path / "sky.exr", sky_image())
+    write_image(tmp_path / "sky.exr", sky())
     write_image(tmp_path / "tau.exr", np.linspace(0.2, 0.8, 8, dtype=np.float32).reshape(2, 4, 1))
     scene = sphere_scene({"type": "environment", "path": "sky.exr"}, size_px=16, spp=8)
     scene["emitters"].append({"type": "sun", "direction": [0, 1, 1], "irradiance_w_m2": 100.0})
