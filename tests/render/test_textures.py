@@ -311,7 +311,7 @@ def test_uniform_roughness_textures_render_the_constant_surface(tmp_path: Path) 
 # ------------------------------------------------------------------------------------------ UVs
 def test_texture_coordinates_of_every_source_have_their_origin_bottom_left(tmp_path: Path) -> None:
     # A unit quad in the z = 0 plane with uv = (x, y): rays at (0.25, 0.75) must report uv (0.25, 0.75)
-    # for a rectangle, an inline mesh, an OBJ file (vt) and a PLY file (u, v).
+    # for a rectangle, an inline mesh, an OBJ file (vt) and PLY files (u, v and s, t).
     quad = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
     (tmp_path / "quad.obj").write_text(
         "".join(f"v {x} {y} {z}\n" for x, y, z in quad)
@@ -322,12 +322,17 @@ def test_texture_coordinates_of_every_source_have_their_origin_bottom_left(tmp_p
         "property float u\nproperty float v\nelement face 2\nproperty list uchar int vertex_indices\n"
         "end_header\n" + "".join(f"{x} {y} {z} {x} {y}\n" for x, y, z in quad) + "3 0 1 2\n3 0 2 3\n"
     )
+    ply = (tmp_path / "quad.ply").read_text()
+    (tmp_path / "quad_st.ply").write_text(
+        ply.replace("float u\n", "float s\n").replace("float v\n", "float t\n")
+    )
     shapes = [
         {"type": "rectangle", "center_m": [0.5, 0.5, 0], "normal": [0, 0, 1], "up": [0, 1, 0], "width_m": 1,
          "height_m": 1},
         {"type": "mesh", "vertices_m": quad, "indices": [[0, 1, 2], [0, 2, 3]], "uvs": [q[:2] for q in quad]},
         {"type": "mesh_file", "path": "quad.obj"},
         {"type": "mesh_file", "path": "quad.ply"},
+        {"type": "mesh_file", "path": "quad_st.ply"},
     ]  # fmt: skip
     mi = load_mitsuba()
     write_image(tmp_path / "t.png", np.zeros((2, 2, 3), np.uint8))
