@@ -57,7 +57,9 @@ def band_edges_xyz_weights(edges_nm: np.ndarray, step_nm: float = 1.0) -> np.nda
     weights = np.zeros((edges.size - 1, 3))
     for band in range(edges.size - 1):
         low_nm, high_nm = edges[band], edges[band + 1]
-        grid_nm = np.clip(np.arange(low_nm, high_nm + 0.5 * step_nm, step_nm), low_nm, high_nm)
+        # Both edges are nodes (a band of 12.5 nm has 13 intervals of 0.96 nm, not 12 of 1 nm and a gap).
+        nodes = max(2, int(np.ceil((high_nm - low_nm) / step_nm - 1e-9)) + 1)
+        grid_nm = np.linspace(low_nm, high_nm, nodes)
         weights[band] = np.trapezoid(cie_cmf(grid_nm), grid_nm, axis=0)
     return weights
 

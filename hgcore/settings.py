@@ -64,6 +64,18 @@ class SceneLimits(BaseSettings):
         256 * 1024 * 1024, ge=1, description="Largest total unpacked size of an uploaded bundle, bytes."
     )
     max_bundle_files: int = Field(1000, ge=1, description="Largest number of files in an uploaded bundle.")
+    max_textures: int = Field(
+        64, ge=0, description="Largest number of image files a scene's textures and environment read."
+    )
+    max_texture_pixels: int = Field(
+        8192 * 4096, ge=1, description="Largest width × height of one texture or environment image, pixels."
+    )
+    max_texture_bytes: int = Field(
+        1024 * 1024 * 1024,
+        ge=1,
+        description="Largest decoded size of all a scene's images together (width × height × channels × 4 "
+        "bytes: float32), bytes.",
+    )
     max_usd_prims: int = Field(100_000, ge=1, description="Largest number of prims traversed in a USD stage.")
     max_usd_memory_bytes: int = Field(
         2 * 1024 * 1024 * 1024,

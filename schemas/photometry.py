@@ -31,13 +31,16 @@ from schemas.scene import (
     CylinderEmitter,
     D65Spectrum,
     DiskEmitter,
+    EnvironmentEmitter,
     RectangleEmitter,
     SphereEmitter,
+    SunEmitter,
     TabulatedSpectrum,
 )
 
 SpectrumModel = ConstantSpectrum | BlackbodySpectrum | D65Spectrum | CieFSpectrum | TabulatedSpectrum
-EmitterModel = SphereEmitter | CylinderEmitter | RectangleEmitter | DiskEmitter
+SurfaceEmitterModel = SphereEmitter | CylinderEmitter | RectangleEmitter | DiskEmitter
+EmitterModel = SurfaceEmitterModel | EnvironmentEmitter | SunEmitter
 
 LUMINOUS_EFFICACY_LM_PER_W = 683.0
 #: The visible range of the CIE 1931 tables, nm; luminance integrals run over it.
@@ -78,7 +81,7 @@ def luminance_per_radiance_scale(spectrum: SpectrumModel) -> float:
     return LUMINOUS_EFFICACY_LM_PER_W * integrate_spectrum(spectrum, VISIBLE_MIN_NM, VISIBLE_MAX_NM, True)
 
 
-def emitter_area_m2(emitter: EmitterModel) -> float:
+def emitter_area_m2(emitter: SurfaceEmitterModel) -> float:
     """Emitting area in m²: sphere 4πR², open cylinder 2πRL, rectangle W·H, disk πR²."""
     if isinstance(emitter, SphereEmitter):
         return 4.0 * math.pi * emitter.radius_m**2
@@ -92,9 +95,18 @@ def emitter_area_m2(emitter: EmitterModel) -> float:
 def emitter_radiance_scale(
     emitter: EmitterModel, wavelength_min_nm: float, wavelength_max_nm: float
 ) -> float:
-    """The factor c of L_λ = c·s(λ): ``radiance_scale`` or c = P / (π A ∫_{film range} s dλ)."""
+    """The factor c of L_λ = c·s(λ): ``radiance_scale``, or c = P / (π A ∫_{film range} s dλ) for a surface
+    emitter's power P, or c = E / (Ω ∫_{film range} s dλ) for a sun's irradiance E (Ω its solid angle)."""
     if emitter.radiance_scale is not None:
         return emitter.radiance_scale
+    if isinstance(emitter, SunEmitter):
+        assert emitter.irradiance_w_m2 is not None  # the model sets exactly one of the two
+        integral = integrate_spectrum(emitter.spectrum, wavelength_min_nm, wavelength_max_nm)
+        if integral <= 0.0:
+            raise InputError(
+                "spectrum: zero over the film's wavelength range, so irradiance_w_m2 cannot be met"
+            )
+        return emitter.irradiance_w_m2 / (emitter.solid_angle_sr() * integral)
     assert emitter.power_w is not None  # guaranteed by the model: exactly one of the two is set
     spectral_integral = integrate_spectrum(emitter.spectrum, wavelength_min_nm, wavelength_max_nm)
     if spectral_integral <= 0.0:

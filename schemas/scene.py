@@ -26,6 +26,7 @@ import re
 from typing import Annotated, Any, Literal
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Discriminator,
@@ -152,13 +153,123 @@ Spectrum = Annotated[
 ]
 
 
+# --- textures ------------------------------------------------------------------------------------
+
+#: Image files a texture or an environment may name (decoded with OpenImageIO in the worker).
+TEXTURE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".tif", ".tiff")
+#: How texture coordinates outside [0, 1] read the image, per axis: ``repeat`` (tile), ``clamp`` (edge
+#: texels), ``mirror`` (tile, every other copy mirrored), ``black`` (0 outside): USD ``wrapS``/``wrapT``,
+#: glTF ``wrapS``/``wrapT``.
+WrapMode = Literal["repeat", "clamp", "mirror", "black"]
+#: ``bilinear``: between the four nearest texel centres; ``nearest``: the texel the point falls in.
+TextureFilter = Literal["bilinear", "nearest"]
+#: How the image's values are decoded: ``srgb`` (the sRGB transfer curve, IEC 61966-2-1), ``linear`` (as
+#: stored, USD ``raw``), ``auto`` (sRGB for 8- and 16-bit integer images, linear for float images: USD's).
+ColorSpace = Literal["auto", "srgb", "linear"]
+#: The image channel(s) a parameter reads: one of ``r``, ``g``, ``b``, ``a`` for a scalar (a one-channel
+#: image gives the same value for r, g, b; an image without alpha has a = 1), ``rgb`` for a colour.
+TextureChannel = Literal["r", "g", "b", "a", "rgb"]
+UV_SET_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]{0,63}$"
+Vec2 = Annotated[list[float], Field(min_length=2, max_length=2)]
+
+
+class UvTransform(StrictModel):
+    """An affine map of texture coordinates applied before the lookup: uv' = R(rotation_deg)·(scale ⊙ uv)
+    + offset, R a counter-clockwise rotation in the (u, v) plane (v up): USD ``UsdTransform2d``'s and glTF
+    ``KHR_texture_transform``'s order (scale, rotate, translate)."""
+
+    scale: Vec2 = Field(default_factory=lambda: [1.0, 1.0])
+    offset: Vec2 = Field(default_factory=lambda: [0.0, 0.0])
+    rotation_deg: float = 0.0
+
+
+class ImageTexture(StrictModel):
+    """A material parameter read from an image of the bundle through a shape's texture coordinates.
+
+    Texture coordinates (u, v) have their origin at the image's **bottom-left** corner and v pointing up
+    (OBJ, USD ``st``, Blender); each texel covers a 1/width × 1/height cell. The decoded value x (``channel``
+    of the image at (u', v') after ``uv_transform``, filtered and wrapped) becomes the parameter's value
+    ``offset + scale · x`` in the parameter's own units (µm for a film thickness: ``offset`` the thinnest,
+    ``offset + scale`` the thickest film of a [0, 1] image — the min/max mapping of glTF's
+    ``KHR_materials_iridescence``); for a colour, per channel of linear sRGB (a number or [r, g, b]), then
+    clipped to [0, 1] and turned into a reflectance spectrum (docs/scenes.md, "Textures"). Values outside a
+    parameter's range are clipped to it. ``uv_set`` names the shape's texture coordinates (``st`` unless
+    a mesh gives ``uv_sets``).
+    """
+
+    type: Literal["image"]
+    path: Annotated[str, Field(min_length=1, max_length=255)]
+    uv_set: Annotated[str, Field(pattern=UV_SET_PATTERN)] = "st"
+    wrap_u: WrapMode = "repeat"
+    wrap_v: WrapMode = "repeat"
+    filter: TextureFilter = "bilinear"
+    color_space: ColorSpace = "auto"
+    channel: TextureChannel | None = None
+    scale: (
+        Annotated[float, Field(ge=-1e6, le=1e6)]
+        | Annotated[list[Annotated[float, Field(ge=-1e6, le=1e6)]], Field(min_length=3, max_length=3)]
+    ) = 1.0
+    offset: (
+        Annotated[float, Field(ge=-1e6, le=1e6)]
+        | Annotated[list[Annotated[float, Field(ge=-1e6, le=1e6)]], Field(min_length=3, max_length=3)]
+    ) = 0.0
+    uv_transform: UvTransform | None = None
+
+    @field_validator("path")
+    @classmethod
+    def _inside_bundle(cls, path: str) -> str:
+        return check_bundle_relative_path(path, suffixes=TEXTURE_SUFFIXES)
+
+    def check_scalar(self) -> ImageTexture:
+        """A texture of a scalar parameter: one channel (default ``r``), scalar ``scale`` and ``offset``."""
+        if self.channel == "rgb":
+            raise InputError("channel: a scalar parameter reads one channel (r, g, b or a), not rgb")
+        if isinstance(self.scale, list) or isinstance(self.offset, list):
+            raise InputError("scale and offset of a scalar parameter's texture must be numbers")
+        return self
+
+    @property
+    def scalar_channel(self) -> str:
+        """The channel a scalar parameter reads (``r`` unless given)."""
+        return self.channel or "r"
+
+    @property
+    def colour_channel(self) -> str:
+        """The channel(s) a colour parameter reads (``rgb`` unless given; one channel is a grey)."""
+        return self.channel or "rgb"
+
+
+def _value_or_texture(value: Any) -> str:
+    if isinstance(value, ImageTexture) or (isinstance(value, dict) and value.get("type") == "image"):
+        return "texture"
+    return "value"
+
+
+def _scalar_texture(texture: ImageTexture) -> ImageTexture:
+    return texture.check_scalar()
+
+
+def Textured(value_type: Any) -> Any:
+    """A scalar material parameter: a number of ``value_type`` or an ``ImageTexture`` of one channel."""
+    return Annotated[
+        Annotated[value_type, Tag("value")]
+        | Annotated[ImageTexture, AfterValidator(_scalar_texture), Tag("texture")],
+        Discriminator(_value_or_texture),
+    ]
+
+
 def _reflectance_kind(value: Any) -> str:
+    if _value_or_texture(value) == "texture":
+        return "texture"
     return "spectrum" if isinstance(value, dict | BaseModel) else "value"
 
 
-#: A reflectance: a number in [0, 1] or a spectrum (whose values should stay in [0, 1]).
+#: A reflectance: a number in [0, 1], a spectrum (whose values should stay in [0, 1]) or a colour texture
+#: (``ImageTexture``: linear sRGB upsampled to a spectrum, docs/scenes.md "Textures").
 Reflectance = Annotated[
-    Annotated[UnitInterval, Tag("value")] | Annotated[Spectrum, Tag("spectrum")],
+    Annotated[UnitInterval, Tag("value")]
+    | Annotated[Spectrum, Tag("spectrum")]
+    | Annotated[ImageTexture, Tag("texture")],
     Discriminator(_reflectance_kind),
 ]
 
@@ -417,9 +528,87 @@ def _check_rectangle_frame(
         raise InputError(f"{up_name} must not be parallel to {normal_name}")
 
 
+class EnvironmentEmitter(StrictModel):
+    """Light from infinitely far away in every direction (an overcast sky, an HDR environment map).
+
+    Either a constant dome, L(λ) = ``radiance_scale`` · ``spectrum``(λ) from every direction, or a
+    latitude-longitude image (``path``: EXR/HDR or any texture format) in the OpenEXR convention (USD
+    ``DomeLight``): +Y up, the image's top row the zenith, its centre column towards +Z, a quarter to the
+    left (u = 0.25) towards +X; each texel's linear sRGB c becomes L(λ) = ``radiance_scale`` · S_c(λ) ·
+    D65(λ)/Y(D65) (the emitter upsampling of docs/scenes.md "Textures": an image value (1, 1, 1) has the
+    luminance of a unit equal-energy radiance). ``transform`` turns the dome (a rotation; its translation is
+    ignored). At most one environment per scene.
+    """
+
+    type: Literal["environment"]
+    spectrum: Spectrum | None = None
+    path: Annotated[str, Field(min_length=1, max_length=255)] | None = None
+    radiance_scale: PositiveFloat = 1.0
+    transform: Transform | None = None
+
+    @field_validator("path")
+    @classmethod
+    def _inside_bundle(cls, path: str | None) -> str | None:
+        return None if path is None else check_bundle_relative_path(path, suffixes=TEXTURE_SUFFIXES)
+
+    @model_validator(mode="after")
+    def _one_source(self) -> EnvironmentEmitter:
+        if (self.spectrum is None) == (self.path is None):
+            raise InputError("give exactly one of spectrum (a constant dome) or path (a lat-long image)")
+        if self.transform is not None:
+            rotation = [row[:3] for row in self.transform.to_matrix()[:3]]
+            for i in range(3):
+                for j in range(3):
+                    dot = math.fsum(rotation[k][i] * rotation[k][j] for k in range(3))
+                    if abs(dot - (1.0 if i == j else 0.0)) > 1e-6:
+                        raise InputError("transform must be a rotation (no scale or shear)")
+        return self
+
+
+#: The largest angular diameter of a ``sun`` (degrees).
+MAX_SUN_DIAMETER_DEG = 60.0
+
+
+class SunEmitter(StrictModel):
+    """A uniformly bright disk at infinity: the sun (angular diameter 0.53°) or any distant round source.
+
+    ``direction`` points from the scene towards the sun's centre. Its spectral radiance is
+    L(λ) = c · ``spectrum``(λ) over a cone of half-angle α = ``angular_diameter_deg``/2; either
+    ``radiance_scale`` gives c, or ``irradiance_w_m2`` the irradiance on a surface facing the sun over the
+    film's wavelength range, E = Ω·c·∫_{λmin}^{λmax} s dλ with Ω = 2π(1 − cos α). Its coherence is that of
+    a uniform disk of angular radius α (van Cittert–Zernike: ℓ = 2/(kα), docs/physics.md §9).
+    """
+
+    type: Literal["sun"]
+    direction: Vec3
+    angular_diameter_deg: Annotated[float, Field(gt=0.0, le=MAX_SUN_DIAMETER_DEG)] = 0.53
+    spectrum: Spectrum = Field(
+        default_factory=lambda: BlackbodySpectrum(type="blackbody", temperature_k=5778.0)
+    )
+    irradiance_w_m2: PositiveFloat | None = None
+    radiance_scale: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _one_intensity(self) -> SunEmitter:
+        _check_direction(self.direction, "direction")
+        if (self.irradiance_w_m2 is None) == (self.radiance_scale is None):
+            raise InputError(
+                "give exactly one of irradiance_w_m2 (W·m⁻² over the film's range) or radiance_scale"
+            )
+        return self
+
+    def solid_angle_sr(self) -> float:
+        """Ω = 2π(1 − cos α) of the disk (sr), formed as 2π·2sin²(α/2) (no cancellation)."""
+        half_angle = math.radians(self.angular_diameter_deg) / 2.0
+        return 4.0 * math.pi * math.sin(half_angle / 2.0) ** 2
+
+
 Emitter = Annotated[
-    SphereEmitter | CylinderEmitter | RectangleEmitter | DiskEmitter, Field(discriminator="type")
+    SphereEmitter | CylinderEmitter | RectangleEmitter | DiskEmitter | EnvironmentEmitter | SunEmitter,
+    Field(discriminator="type"),
 ]
+#: Emitters with a surface in the scene (the others are at infinity).
+SURFACE_EMITTER_TYPES = (SphereEmitter, CylinderEmitter, RectangleEmitter, DiskEmitter)
 
 
 # --- shapes --------------------------------------------------------------------------------------
@@ -458,6 +647,10 @@ class MeshShape(_ShapeBase):
         Field(min_length=1),
     ]
     normals: list[Vec3] | None = None
+    #: Per-vertex texture coordinates [u, v] (the set ``st``; origin at an image's bottom-left, v up).
+    uvs: list[Vec2] | None = None
+    #: Further named sets of per-vertex texture coordinates (a texture's ``uv_set`` picks one).
+    uv_sets: dict[Annotated[str, Field(pattern=UV_SET_PATTERN)], list[Vec2]] | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> MeshShape:
@@ -472,7 +665,21 @@ class MeshShape(_ShapeBase):
             raise InputError(
                 f"normals has {len(self.normals)} entries, expected one per vertex ({vertex_count})"
             )
+        for name, uvs in self.texture_coordinate_sets().items():
+            if len(uvs) != vertex_count:
+                raise InputError(
+                    f"uv set {name!r} has {len(uvs)} entries, expected one per vertex ({vertex_count})"
+                )
+        if self.uv_sets is not None and "st" in self.uv_sets and self.uvs is not None:
+            raise InputError("uv_sets must not name 'st' when uvs (the set 'st') is given")
         return self
+
+    def texture_coordinate_sets(self) -> dict[str, list[list[float]]]:
+        """Every named set of texture coordinates: ``uvs`` as ``st`` and the ``uv_sets``."""
+        sets = dict(self.uv_sets or {})
+        if self.uvs is not None:
+            sets["st"] = self.uvs
+        return sets
 
 
 class MeshFileShape(_ShapeBase):
@@ -645,6 +852,8 @@ class MirrorMaterial(StrictModel):
 
     type: Literal["mirror"]
     conductor: ConductorName | Literal["perfect"] = "perfect"
+    #: A colour multiplying the Fresnel reflectance: a number, a spectrum or a colour texture (none: 1).
+    tint: Reflectance | None = None
 
 
 class DielectricMaterial(StrictModel):
@@ -655,14 +864,26 @@ class DielectricMaterial(StrictModel):
     exterior_ior: Annotated[float, Field(ge=1.0, le=10.0)] = 1.0
 
 
+#: Largest film thickness, RMS roughness (µm) and correlation length (µm): the ranges a texture's values
+#: are clipped to (a textured roughness or film may reach 0; a correlation length stays ≥ 1 nm).
+MAX_FILM_THICKNESS_UM = 100.0
+MAX_ROUGHNESS_RMS_UM = 100.0
+MIN_CORRELATION_LENGTH_UM = 1e-3
+MAX_CORRELATION_LENGTH_UM = 1e4
+#: σ_h in µm, or a one-channel texture of it.
+RoughnessRms = Textured(Annotated[float, Field(gt=0.0, le=MAX_ROUGHNESS_RMS_UM)])
+#: ℓ_c in µm, or a one-channel texture of it.
+CorrelationLength = Textured(Annotated[float, Field(gt=0.0, le=MAX_CORRELATION_LENGTH_UM)])
+
+
 class _RoughSurface(_ScatteringMaterial):
     """Statistical rough surface (Eq. 15): RMS height, correlation length and PSD model.
 
     ``gaussian``: PSD ∝ exp(−(π·ℓ·f)²); ``abc`` (K-correlation): PSD ∝ (1 + (2π·ℓ·f)²)^(−(psd_exponent+1)/2).
     """
 
-    roughness_rms_um: Annotated[float, Field(gt=0.0, le=100.0)]
-    correlation_length_um: Annotated[float, Field(gt=0.0, le=1e4)]
+    roughness_rms_um: RoughnessRms
+    correlation_length_um: CorrelationLength
     psd: PsdModel = "gaussian"
     psd_exponent: Annotated[float, Field(gt=1.0, le=10.0)] = 2.0
 
@@ -670,6 +891,9 @@ class _RoughSurface(_ScatteringMaterial):
 class RoughConductorMaterial(_RoughSurface):
     type: Literal["rough_conductor"]
     conductor: ConductorName
+    #: A colour multiplying the conductor's Fresnel reflectance (``mirror`` has it too): a number, a
+    #: spectrum or a colour texture; none by default.
+    tint: Reflectance | None = None
 
 
 class RoughDielectricMaterial(_RoughSurface):
@@ -702,11 +926,12 @@ class ThinFilmMaterial(_ScatteringMaterial):
     """A thin dielectric film over a substrate (Eq. 18), on a weakly rough interface (Eq. 15)."""
 
     type: Literal["thin_film"]
-    film_thickness_um: Annotated[float, Field(gt=0.0, le=100.0)]
+    #: τ in µm, or a texture of it (clipped to [0, 100] µm: 0 is a bare substrate, a soap film's black spot)
+    film_thickness_um: Textured(Annotated[float, Field(gt=0.0, le=MAX_FILM_THICKNESS_UM)])
     film_ior: RefractiveIndex
     substrate: Substrate
-    roughness_rms_um: Annotated[float, Field(gt=0.0, le=100.0)] = 0.05
-    correlation_length_um: Annotated[float, Field(gt=0.0, le=1e4)] = 5.0
+    roughness_rms_um: RoughnessRms = 0.05
+    correlation_length_um: CorrelationLength = 5.0
     psd: PsdModel = "gaussian"
     psd_exponent: Annotated[float, Field(gt=1.0, le=10.0)] = 2.0
     #: Number of multiply-reflected beams summed in the film (2 = the paper's two-beam form).
@@ -814,6 +1039,11 @@ class Scene(StrictModel):
             {"pointer": f"/shapes/{index}/material", "message": f"unknown material {shape.material!r}"}
             for index, shape in enumerate(self.shapes)
             if shape.material not in self.materials
+        ]
+        environments = [i for i, e in enumerate(self.emitters) if isinstance(e, EnvironmentEmitter)]
+        problems += [
+            {"pointer": f"/emitters/{index}", "message": "a scene has at most one environment emitter"}
+            for index in environments[1:]
         ]
         if problems:
             raise PydanticCustomError(

@@ -12,8 +12,14 @@ Standard data written (units: stage units = metres):
   the generated triangles, vertex normals and ``st`` texture coordinates) → ``UsdGeom.Mesh``; mesh files →
   an ``Xform`` with ``hg:path``.
 * emitters → ``UsdLux`` Sphere/Cylinder/Rect/Disk lights, ``inputs:intensity`` = the emitter's luminance in
-  nits (K_m·c·∫ s ȳ dλ, :mod:`schemas.photometry`), colour white, exposure 0, normalize off.
-* materials → ``UsdShade.Material`` with a ``UsdPreviewSurface`` approximating the look, plus ``hg:id``.
+  nits (K_m·c·∫ s ȳ dλ, :mod:`schemas.photometry`), colour white, exposure 0, normalize off; an
+  environment → ``DomeLight`` (its image as ``inputs:texture:file``, format ``latlong``: the same OpenEXR
+  convention), a sun → ``DistantLight`` (``inputs:angle`` = its angular diameter, local −Z from the sun).
+* materials → ``UsdShade.Material`` with a ``UsdPreviewSurface`` approximating the look, plus ``hg:id``; a
+  textured diffuse reflectance → a ``UsdUVTexture`` (file, wrapS/T, sourceColorSpace, scale/bias) read
+  through a ``UsdPrimvarReader_float2`` of its uv set into ``diffuseColor``.
+* mesh texture coordinates (``uvs``, ``uv_sets``) → ``texCoord2f[]`` primvars (``st`` and the set names),
+  vertex interpolation.
 * film, name and schema id → root layer ``customLayerData["hgrender"]``.
 """
 
@@ -33,13 +39,16 @@ from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_sc
 from schemas.procedural import generate_mesh
 from schemas.scene import (
     PROCEDURAL_SHAPE_TYPES,
+    ConstantSpectrum,
     CylinderEmitter,
     CylinderShape,
     DielectricMaterial,
     DiffuseMaterial,
     DiskEmitter,
     DiskShape,
+    EnvironmentEmitter,
     GratingMaterial,
+    ImageTexture,
     MeshFileShape,
     MeshShape,
     MirrorMaterial,
@@ -51,6 +60,7 @@ from schemas.scene import (
     Scene,
     SphereEmitter,
     SphereShape,
+    SunEmitter,
     ThinFilmMaterial,
 )
 from schemas.usd_common import (
@@ -139,14 +149,49 @@ def _write_camera(stage: Usd.Stage, camera: PerspectiveCamera) -> None:
     write_hg_attributes(usd_camera.GetPrim(), camera.model_dump(mode="json"))
 
 
+#: USD ``UsdUVTexture`` wrap tokens of hgrender's wrap modes.
+USD_WRAP = {"repeat": "repeat", "clamp": "clamp", "mirror": "mirror", "black": "black"}
+#: USD ``sourceColorSpace`` tokens of hgrender's colour spaces.
+USD_COLOUR_SPACE = {"auto": "auto", "srgb": "sRGB", "linear": "raw"}
+
+
+def _write_uv_texture(stage: Usd.Stage, material: UsdShade.Material, texture: ImageTexture) -> Any:
+    """A ``UsdUVTexture`` of ``texture`` reading the uv set through a ``UsdPrimvarReader_float2``; returns
+    its ``rgb`` output (for a connection). Its scale/bias are hgrender's scale/offset; a ``uv_transform``
+    is kept in the ``hg:`` attributes only."""
+    path = material.GetPath()
+    reader = UsdShade.Shader.Define(stage, path.AppendChild("TexCoordReader"))
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set(texture.uv_set)
+    shader = UsdShade.Shader.Define(stage, path.AppendChild("DiffuseTexture"))
+    shader.CreateIdAttr("UsdUVTexture")
+    shader.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(texture.path))
+    shader.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    shader.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(USD_WRAP[texture.wrap_u])
+    shader.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(USD_WRAP[texture.wrap_v])
+    colour_space = USD_COLOUR_SPACE[texture.color_space]
+    shader.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(colour_space)
+    scale = np.broadcast_to(np.asarray(texture.scale, dtype=float), 3)
+    offset = np.broadcast_to(np.asarray(texture.offset, dtype=float), 3)
+    shader.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*scale.tolist(), 1.0))
+    shader.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*offset.tolist(), 0.0))
+    return shader.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+
+
 def _write_preview_surface(stage: Usd.Stage, material: UsdShade.Material, model: Any) -> None:
     """A UsdPreviewSurface that approximates the hgrender material for display in DCC tools."""
     shader = UsdShade.Shader.Define(stage, material.GetPath().AppendChild("PreviewSurface"))
     shader.CreateIdAttr("UsdPreviewSurface")
     diffuse_rgb, metallic, roughness, opacity, ior = (0.5, 0.5, 0.5), 0.0, 0.5, 1.0, 1.5
+    diffuse_texture = None
     if isinstance(model, DiffuseMaterial):
         reflectance = model.reflectance
-        diffuse_rgb = (reflectance,) * 3 if isinstance(reflectance, float) else reflectance_rgb(reflectance)
+        if isinstance(reflectance, ImageTexture):
+            diffuse_texture = _write_uv_texture(stage, material, reflectance)
+        elif isinstance(reflectance, float):
+            diffuse_rgb = (reflectance,) * 3
+        else:
+            diffuse_rgb = reflectance_rgb(reflectance)
     elif isinstance(model, MirrorMaterial | RoughConductorMaterial | GratingMaterial):
         diffuse_rgb, metallic = CONDUCTOR_PREVIEW_RGB[model.conductor], 1.0
         roughness = 0.0 if isinstance(model, MirrorMaterial) else 0.3
@@ -157,7 +202,10 @@ def _write_preview_surface(stage: Usd.Stage, material: UsdShade.Material, model:
     elif isinstance(model, DielectricMaterial | RoughDielectricMaterial):
         opacity, roughness = 0.0, (0.0 if isinstance(model, DielectricMaterial) else 0.3)
         ior = model.ior if isinstance(model.ior, float) else 1.5
-    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*diffuse_rgb))
+    diffuse = shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f)
+    diffuse.Set(Gf.Vec3f(*diffuse_rgb))
+    if diffuse_texture is not None:
+        diffuse.ConnectToSource(diffuse_texture)
     shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(metallic)
     shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(roughness)
     shader.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(opacity)
@@ -181,6 +229,15 @@ def _write_materials(stage: Usd.Stage, scene: Scene) -> dict[str, UsdShade.Mater
         _write_preview_surface(stage, material, model)
         materials[material_id] = material
     return materials
+
+
+def _write_texture_coordinates(mesh: UsdGeom.Mesh, name: str, uvs: np.ndarray) -> None:
+    """Per-vertex texture coordinates as the ``texCoord2f[]`` primvar ``name`` (USD's ``st`` convention:
+    origin at the image's bottom-left, v up — hgrender's)."""
+    primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+        name, Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+    )
+    primvar.Set(Vt.Vec2fArray.FromNumpy(np.asarray(uvs, dtype=np.float32)))
 
 
 def _write_shape(stage: Usd.Stage, path: str, shape: Any) -> UsdGeom.Xformable:
@@ -220,6 +277,8 @@ def _write_shape(stage: Usd.Stage, path: str, shape: Any) -> UsdGeom.Xformable:
         if shape.normals is not None:
             geometry.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(shape.normals, dtype=np.float32)))
             geometry.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        for name, uvs in shape.texture_coordinate_sets().items():
+            _write_texture_coordinates(geometry, name, np.asarray(uvs))
     elif isinstance(shape, PROCEDURAL_SHAPE_TYPES):
         geometry = UsdGeom.Mesh.Define(stage, path)
         placement = np.eye(4)
@@ -232,10 +291,7 @@ def _write_shape(stage: Usd.Stage, path: str, shape: Any) -> UsdGeom.Xformable:
         )
         geometry.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(generated.normals.astype(np.float32)))
         geometry.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
-        texcoords = UsdGeom.PrimvarsAPI(geometry).CreatePrimvar(
-            "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
-        )
-        texcoords.Set(Vt.Vec2fArray.FromNumpy(generated.uvs.astype(np.float32)))
+        _write_texture_coordinates(geometry, "st", generated.uvs)
     elif isinstance(shape, MeshFileShape):
         geometry = UsdGeom.Xform.Define(stage, path)
         placement = np.eye(4)
@@ -249,6 +305,9 @@ def _write_shape(stage: Usd.Stage, path: str, shape: Any) -> UsdGeom.Xformable:
 
 
 def _write_emitter(stage: Usd.Stage, path: str, emitter: Any, scene: Scene) -> None:
+    if isinstance(emitter, EnvironmentEmitter | SunEmitter):
+        _write_light_at_infinity(stage, path, emitter, scene)
+        return
     if isinstance(emitter, SphereEmitter):
         light: Any = UsdLux.SphereLight.Define(stage, path)
         light.CreateRadiusAttr(emitter.radius_m)
@@ -283,6 +342,39 @@ def _write_emitter(stage: Usd.Stage, path: str, emitter: Any, scene: Scene) -> N
     write_hg_attributes(light.GetPrim(), emitter.model_dump(mode="json"))
 
 
+def _write_light_at_infinity(stage: Usd.Stage, path: str, emitter: Any, scene: Scene) -> None:
+    """An environment as a ``DomeLight`` (lat-long image or a constant colour) and a sun as a
+    ``DistantLight`` whose local −Z points away from the sun, ``inputs:angle`` its angular diameter;
+    ``inputs:intensity``: the luminance in nits of an untinted radiance c (an image's (1, 1, 1) texel, a
+    constant dome's spectrum, the sun's disk)."""
+    film = scene.film
+    radiance_scale = emitter_radiance_scale(emitter, film.wavelength_min_nm, film.wavelength_max_nm)
+    if isinstance(emitter, EnvironmentEmitter):
+        light: Any = UsdLux.DomeLight.Define(stage, path)
+        if emitter.path is not None:
+            light.CreateTextureFileAttr(Sdf.AssetPath(emitter.path))
+            light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
+            nits = radiance_scale * luminance_per_radiance_scale(ConstantSpectrum(type="constant", value=1.0))
+        else:
+            nits = radiance_scale * luminance_per_radiance_scale(emitter.spectrum)
+        if emitter.transform is not None:
+            rotation = np.eye(4)
+            rotation[:3, :3] = np.asarray(emitter.transform.to_matrix())[:3, :3]
+            _set_transform_op(light, rotation, "hgPlacement")
+    else:
+        light = UsdLux.DistantLight.Define(stage, path)
+        light.CreateAngleAttr(emitter.angular_diameter_deg)
+        towards_sun = _unit(emitter.direction)
+        x_axis = _any_perpendicular(towards_sun)
+        frame = _frame_matrix(x_axis, np.cross(towards_sun, x_axis), towards_sun, [0.0, 0.0, 0.0])
+        _set_transform_op(light, frame, "hgPlacement")
+        nits = radiance_scale * luminance_per_radiance_scale(emitter.spectrum)
+    light.CreateIntensityAttr(nits)
+    light.CreateExposureAttr(0.0)
+    light.CreateColorAttr(Gf.Vec3f(1.0, 1.0, 1.0))
+    write_hg_attributes(light.GetPrim(), emitter.model_dump(mode="json"))
+
+
 def build_stage(scene: Scene, stage: Usd.Stage) -> None:
     """Author ``scene`` into an empty ``stage``."""
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
@@ -305,7 +397,8 @@ def build_stage(scene: Scene, stage: Usd.Stage) -> None:
     for index, shape in enumerate(scene.shapes):
         geometry = _write_shape(stage, f"/World/Shapes/shape_{index:04d}", shape)
         prim = geometry.GetPrim()
-        write_hg_attributes(prim, shape.model_dump(mode="json", exclude={"material"}))
+        # Texture coordinates travel as primvars (``_write_texture_coordinates``), not as hg: attributes.
+        write_hg_attributes(prim, shape.model_dump(mode="json", exclude={"material", "uvs", "uv_sets"}))
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(materials[shape.material])
     UsdGeom.Scope.Define(stage, "/World/Lights")
     for index, emitter in enumerate(scene.emitters):

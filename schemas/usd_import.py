@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pxr import Tf, Usd, UsdGeom, UsdLux, UsdShade
+from pxr import Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade
 from pydantic import TypeAdapter, ValidationError
 
 from hgcore.settings import SceneLimits
@@ -53,6 +53,7 @@ from schemas.errors import SceneError, SceneProblem, without_paths
 from schemas.mesh_files import fan_triangulate, load_scene_meshes
 from schemas.photometry import rgb_spectrum, tinted_spectrum
 from schemas.scene import SCHEMA_ID, Emitter, Material, PerspectiveCamera, Scene, Shape
+from schemas.textures import check_scene_images
 from schemas.usd_common import (
     CONDUCTOR_PREVIEW_RGB,
     LAYER_DATA_KEY,
@@ -207,6 +208,8 @@ class _StageConverter:
             data = read_hg_attributes(prim) | {"material": self.bound_material_id(prim)}
             if data.get("type") == "mesh":
                 self._count_geometry(prim, len(data.get("vertices_m", [])), len(data.get("indices", [])))
+                # hg: meshes keep their vertices verbatim; their texture coordinates are primvars
+                data |= _per_vertex_texture_coordinates(prim, len(data.get("vertices_m", [])))
             model = _validated_element(SHAPE_ADAPTER, data, prim, uses_hg=True)
         else:
             data = self._generic_shape(prim) | {"material": self.bound_material_id(prim)}
@@ -277,23 +280,40 @@ class _StageConverter:
             triangles = triangles[:, [0, 2, 1]]
         if np.linalg.det(matrix[:3, :3]) < 0.0:  # a mirroring transform flips the winding too
             triangles = triangles[:, [0, 2, 1]]
-        data: dict[str, Any] = {
-            "type": "mesh",
-            "vertices_m": (points @ matrix[:3, :3].T + matrix[:3, 3]).tolist(),
-            "indices": triangles.tolist(),
-        }
         normals_primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("normals")
         if normals_primvar and normals_primvar.HasAuthoredValue():
             normals, interpolation = normals_primvar.ComputeFlattened(), normals_primvar.GetInterpolation()
         else:
             normals, interpolation = mesh.GetNormalsAttr().Get(), mesh.GetNormalsInterpolation()
+        world_normals = None
         if normals is not None and interpolation in ("vertex", "varying") and len(normals) == len(points):
             normal_matrix = np.linalg.inv(matrix[:3, :3]).T
             world_normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ normal_matrix.T
             lengths = np.linalg.norm(world_normals, axis=1, keepdims=True)
-            if np.all(lengths > 0.0):
-                data["normals"] = (world_normals / lengths).tolist()
-        return data
+            world_normals = world_normals / lengths if np.all(lengths > 0.0) else None
+        texture_sets = _texture_coordinate_primvars(prim, len(points), len(face_indices))
+        if any(values.shape[0] == len(face_indices) != len(points) for values in texture_sets.values()):
+            # faceVarying texture coordinates: one vertex per face corner (welded meshes cannot hold them)
+            self._count_geometry(prim, len(face_indices) - len(points), 0)
+            corners = fan_triangulate(face_sizes, np.arange(len(face_indices)), _where(prim))
+            if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
+                corners = corners[:, [0, 2, 1]]
+            if np.linalg.det(matrix[:3, :3]) < 0.0:
+                corners = corners[:, [0, 2, 1]]
+            points, triangles = points[face_indices], corners
+            world_normals = None if world_normals is None else world_normals[face_indices]
+            texture_sets = {
+                name: values if values.shape[0] == len(face_indices) else values[face_indices]
+                for name, values in texture_sets.items()
+            }
+        data: dict[str, Any] = {
+            "type": "mesh",
+            "vertices_m": (points @ matrix[:3, :3].T + matrix[:3, 3]).tolist(),
+            "indices": triangles.tolist(),
+        }
+        if world_normals is not None:
+            data["normals"] = world_normals.tolist()
+        return data | _texture_coordinate_fields(texture_sets)
 
     # --- emitters --------------------------------------------------------------------------------
 
@@ -352,11 +372,11 @@ class _StageConverter:
                 "radius_m": radius_m,
             }
             area_m2 = math.pi * radius_m**2
-        elif prim.IsA(UsdLux.DistantLight):
+        elif prim.IsA(UsdLux.DistantLight) or prim.IsA(UsdLux.DomeLight):
             raise SceneError.at(
                 _where(prim),
-                "DistantLight is not supported: the coherence of a source depends on its size and distance; "
-                "use a SphereLight far away (its angular size sets the coherence)",
+                f'{prim.GetTypeName()} is not mapped yet: give it hg:type "sun" or "environment" with '
+                "the fields of hgrender's sun / environment emitter (docs/scenes.md)",
             )
         else:
             raise SceneError.at(_where(prim), f"unsupported light type {prim.GetTypeName()}")
@@ -407,6 +427,47 @@ class _StageConverter:
             "near_clip_m": float(near) * self.meters_per_unit,
             "far_clip_m": float(far) * self.meters_per_unit,
         }
+
+
+def _texture_coordinate_primvars(
+    prim: Usd.Prim, point_count: int, corner_count: int
+) -> dict[str, np.ndarray]:
+    """The mesh's ``texCoord2f``/``float2`` primvars with one value per point (``vertex``/``varying``) or
+    per face corner (``faceVarying``), flattened (indexed primvars resolved), by name; other
+    interpolations (constant, uniform) carry no per-point coordinates and are skipped."""
+    sets: dict[str, np.ndarray] = {}
+    for primvar in UsdGeom.PrimvarsAPI(prim).GetPrimvars():
+        type_name = primvar.GetTypeName()
+        if type_name not in (Sdf.ValueTypeNames.TexCoord2fArray, Sdf.ValueTypeNames.Float2Array):
+            continue
+        if not primvar.HasAuthoredValue():
+            continue
+        values = primvar.ComputeFlattened()
+        if values is None:
+            continue
+        array = np.asarray(values, dtype=np.float64).reshape(-1, 2)
+        interpolation = primvar.GetInterpolation()
+        expected = point_count if interpolation in ("vertex", "varying") else corner_count
+        if interpolation in ("vertex", "varying", "faceVarying") and array.shape[0] == expected:
+            sets[primvar.GetPrimvarName()] = array
+    return sets
+
+
+def _texture_coordinate_fields(sets: dict[str, np.ndarray]) -> dict[str, Any]:
+    """``uvs`` (the set ``st``) and ``uv_sets`` (the others) of a mesh model."""
+    fields: dict[str, Any] = {}
+    if "st" in sets:
+        fields["uvs"] = sets["st"].tolist()
+    others = {name: values.tolist() for name, values in sets.items() if name != "st"}
+    if others:
+        fields["uv_sets"] = others
+    return fields
+
+
+def _per_vertex_texture_coordinates(prim: Usd.Prim, vertex_count: int) -> dict[str, Any]:
+    """The per-vertex texture coordinate primvars of an ``hg:`` mesh (exported by ``usd_export``)."""
+    sets = _texture_coordinate_primvars(prim, vertex_count, -1)
+    return _texture_coordinate_fields(sets)
 
 
 def _matrix(matrix: np.ndarray) -> dict[str, Any]:
@@ -555,6 +616,7 @@ def import_usd(path: str | os.PathLike[str], bundle_dir: str | os.PathLike[str] 
         raise SceneError.at(f"bundle:{root_file.name}", message) from None
     scene = validate_scene(convert_stage(stage, limits, root_file.stem), limits)
     load_scene_meshes(scene, bundle, limits)  # mesh files must exist, parse and fit the triangle budget
+    check_scene_images(scene, bundle, limits)  # images must exist, be readable and fit the texture limits
     return scene
 
 

@@ -65,7 +65,7 @@ FILM_LIMITS: dict[str, tuple[str, str]] = {
 }
 
 #: Numeric arrays of meshes: bounded by the vertex and triangle limits, so the walk does not descend.
-_NUMERIC_ARRAYS = frozenset({"vertices_m", "indices", "normals", "matrix", "to_world"})
+_NUMERIC_ARRAYS = frozenset({"vertices_m", "indices", "normals", "uvs", "uv_sets", "matrix", "to_world"})
 _TABULATED_ARRAYS = ("wavelengths_nm", "values")
 
 
@@ -136,6 +136,31 @@ def _string_and_table_problems(data: Any, limits: SceneLimits) -> list[SceneProb
     return problems
 
 
+def document_image_pointers(data: dict[str, Any]) -> list[str]:
+    """The pointers of the distinct image files a raw scene document names, first mention each: material
+    fields that are ``{"type": "image", "path": …}`` and environment emitters' ``path`` (``schemas.textures``
+    checks the files themselves). Values of the wrong type are left to the schema."""
+
+    def image_path(node: Any) -> str | None:
+        return node.get("path") if isinstance(node, dict) and isinstance(node.get("path"), str) else None
+
+    paths: list[tuple[str, str]] = []
+    materials = data.get("materials")
+    for material_id, material in (materials if isinstance(materials, dict) else {}).items():
+        for key, value in (material if isinstance(material, dict) else {}).items():
+            path = image_path(value)
+            if path is not None and value.get("type") == "image":
+                paths.append((path, json_pointer(["materials", str(material_id), key, "path"])))
+    for index, emitter in enumerate(_list(data, "emitters")):
+        path = image_path(emitter)
+        if path is not None and emitter.get("type") == "environment":
+            paths.append((path, json_pointer(["emitters", index, "path"])))
+    seen: dict[str, str] = {}
+    for path, pointer in paths:
+        seen.setdefault(path, pointer)
+    return list(seen.values())
+
+
 def check_document_limits(data: dict[str, Any], limits: SceneLimits) -> list[SceneProblem]:
     """Problems where a raw (not yet validated) scene document exceeds the deployment's collection
     limits: checked before the schema, so that validating or rendering it never costs more than the
@@ -143,6 +168,9 @@ def check_document_limits(data: dict[str, Any], limits: SceneLimits) -> list[Sce
     materials = data.get("materials")
     shapes, emitters = _list(data, "shapes"), _list(data, "emitters")
     vertices, triangles = _mesh_totals(shapes)
+    images = document_image_pointers(data)
+    # the first image over the limit is named
+    image_pointer = images[limits.max_textures] if len(images) > limits.max_textures else "/materials"
     problems = [
         *_limit_problem(
             "/materials",
@@ -165,6 +193,9 @@ def check_document_limits(data: dict[str, Any], limits: SceneLimits) -> list[Sce
             "/shapes", "triangle count", triangles, limits.max_triangles, "HGRENDER_MAX_TRIANGLES"
         ),
         *_limit_problem("/shapes", "vertex count", vertices, limits.max_vertices, "HGRENDER_MAX_VERTICES"),
+        *_limit_problem(
+            image_pointer, "image count", len(images), limits.max_textures, "HGRENDER_MAX_TEXTURES"
+        ),
     ]
     return problems or _string_and_table_problems(data, limits)
 

@@ -15,6 +15,7 @@ from typing import Any
 
 from hgcore.settings import SceneLimits
 from schemas import SceneError, validate_scene, validate_scene_json
+from schemas.textures import require_no_images
 from service.models import JobOptions
 
 USD_SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd", ".usdz", ".zip")
@@ -34,9 +35,18 @@ def apply_overrides(scene_json: dict[str, Any], options: JobOptions, limits: Sce
     return validate_scene({**scene_json, "film": film}, limits).to_json_dict()
 
 
+#: Why a JSON scene over HTTP cannot name an image: it has no bundle to read it from.
+NO_BUNDLE = (
+    "a JSON scene over HTTP has no bundle to read images from: send the scene as a USD bundle (a .zip with "
+    "scene.usda and its images; textures in the materials' hg: attributes) or render it locally"
+)
+
+
 def scene_from_json(data: Any, options: JobOptions, limits: SceneLimits) -> dict[str, Any]:
     """A JSON scene (already parsed) → validated scene document."""
-    return apply_overrides(validate_scene(data, limits).to_json_dict(), options, limits)
+    scene = validate_scene(data, limits)
+    require_no_images(scene, NO_BUNDLE)
+    return apply_overrides(scene.to_json_dict(), options, limits)
 
 
 def scene_from_upload(
@@ -50,8 +60,9 @@ def scene_from_upload(
     name = Path(filename or "").name
     suffix = Path(name).suffix.lower()
     if suffix == ".json":
-        scene = validate_scene_json(content, limits).to_json_dict()
-        return apply_overrides(scene, options, limits), {}
+        validated = validate_scene_json(content, limits)
+        require_no_images(validated, NO_BUNDLE)
+        return apply_overrides(validated.to_json_dict(), options, limits), {}
     if suffix not in USD_SUFFIXES:
         raise SceneError.at("", f"scene file {name!r}: expected .json or one of {', '.join(USD_SUFFIXES)}")
     from schemas.usd_import import import_usd_isolated

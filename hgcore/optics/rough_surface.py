@@ -82,6 +82,20 @@ class RoughSurface:
         """B = 2π ℓ_c of the ABC model (m)."""
         return 2.0 * math.pi * self.correlation_length_m
 
+    def local(self, rms_height_m: Any, correlation_length_m: Any) -> RoughSurface:
+        """The same PSD model with per-point σ_h and ℓ_c (arrays: a textured surface, one value per lane).
+        Not validated: the caller's values are already within the model's ranges (textures are clipped to
+        them when the scene is compiled)."""
+        surface = object.__new__(RoughSurface)
+        for name, value in (
+            ("rms_height_m", rms_height_m),
+            ("correlation_length_m", correlation_length_m),
+            ("psd_model", self.psd_model),
+            ("abc_exponent", self.abc_exponent),
+        ):
+            object.__setattr__(surface, name, value)
+        return surface
+
 
 def surface_psd(surface: RoughSurface, frequency_sq_per_m2: Any, ops: ArrayOps) -> Any:
     """S(f) in m² at |f|² (cycles²/m²) of the normalised autocorrelation (∫ S d²f = 1)."""
@@ -188,6 +202,34 @@ def reflection_fraction_table(surface: RoughSurface) -> np.ndarray:
     sin_theta = 1.0 - (1.0 - x) ** 2
     grid_sin, grid_wavelength = np.meshgrid(sin_theta, TABLE_WAVELENGTHS_M, indexing="ij")
     return np.asarray(propagating_fraction(surface, grid_sin, grid_wavelength, NUMPY, reflection=True))
+
+
+#: Spacing of ``reflection_fraction_ratio_table``'s nodes in ln(ℓ_c/λ): about that of the wavelength
+#: nodes above (their ln λ steps are 0.020–0.067).
+RATIO_TABLE_LOG_STEP = 0.03
+MAX_RATIO_NODES = 1024
+
+
+def ratio_table_nodes(ratio_min: float, ratio_max: float) -> np.ndarray:
+    """The ℓ_c/λ nodes of ``reflection_fraction_ratio_table`` for ratios in [min, max]: log-uniform,
+    ≈ ``RATIO_TABLE_LOG_STEP`` apart (at least 2, at most ``MAX_RATIO_NODES``)."""
+    low, high = math.log(ratio_min), math.log(max(ratio_max, ratio_min * 1.0001))
+    count = min(MAX_RATIO_NODES, max(2, math.ceil((high - low) / RATIO_TABLE_LOG_STEP) + 1))
+    return np.exp(np.linspace(low, high, count))
+
+
+def reflection_fraction_ratio_table(surface: RoughSurface, ratios: np.ndarray) -> np.ndarray:
+    """P of reflection in air on the (x, ℓ_c/λ) grid, shape (angles, ratios), for a surface whose ℓ_c
+    varies (a texture). P depends on ℓ_c and λ only through their ratio: scaling the frequency plane by λ
+    maps the propagating disk to centre sin θ, radius 1 and the PSD's argument ℓ_c·f to (ℓ_c/λ)·f'; so the
+    ratio ρ is evaluated as a surface of ℓ_c = 1 m at λ = 1/ρ m."""
+    from hgcore.optics.array_ops import NUMPY
+
+    unit = RoughSurface(surface.rms_height_m, 1.0, surface.psd_model, surface.abc_exponent)
+    x = np.linspace(0.0, 1.0, TABLE_ANGLE_NODES)
+    sin_theta = 1.0 - (1.0 - x) ** 2
+    grid_sin, grid_ratio = np.meshgrid(sin_theta, np.asarray(ratios, dtype=float), indexing="ij")
+    return np.asarray(propagating_fraction(unit, grid_sin, 1.0 / grid_ratio, NUMPY, reflection=True))
 
 
 def roughness_exponent(

@@ -16,6 +16,7 @@ from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_sc
 from schemas.scene import BlackbodySpectrum, MeshShape, RoughConductorMaterial, SphereShape, ThinFilmMaterial
 from schemas.usd_export import scene_to_usd
 from schemas.usd_import import import_usd, import_usd_isolated
+from tests.render.images import write_image
 
 EXAMPLE_PATHS = sorted(EXAMPLES_DIR.glob("*.json"))
 
@@ -310,7 +311,9 @@ def test_distant_light_is_rejected_with_its_prim_path(tmp_path: Path) -> None:
     with pytest.raises(SceneError) as caught:
         import_usd(stage_path)
     assert caught.value.problems[0]["pointer"] == "</World/Sun>"
-    assert "DistantLight is not supported" in caught.value.problems[0]["message"]
+    # Not mapped from UsdLux yet (issue 28); an hgrender sun (hg:type "sun") is what it would map onto.
+    assert "DistantLight is not mapped yet" in caught.value.problems[0]["message"]
+    assert 'hg:type "sun"' in caught.value.problems[0]["message"]
 
 
 def test_invalid_hg_attribute_is_named(tmp_path: Path) -> None:
@@ -323,3 +326,86 @@ def test_invalid_hg_attribute_is_named(tmp_path: Path) -> None:
     assert caught.value.problems == [
         {"pointer": "</World/Looks/Coated>", "message": "hg:filmThicknessUm: Input should be greater than 0"}
     ]
+
+
+def _strip_stage(bundle: Path) -> Path:
+    """Two unit quads sharing an edge (6 points, 8 face corners) with faceVarying, indexed ``st`` (a seam:
+    the shared edge has u = 1 on the left quad and u = 0 on the right) and a per-point ``uv2``."""
+    stage = Usd.Stage.CreateNew(str(bundle / "scene.usda"))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.Xform.Define(stage, "/World")
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Strip")
+    mesh.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0)])
+    mesh.CreateFaceVertexCountsAttr([4, 4])
+    mesh.CreateFaceVertexIndicesAttr([0, 1, 4, 3, 1, 2, 5, 4])
+    primvars = UsdGeom.PrimvarsAPI(mesh)
+    st = primvars.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set([(0, 0), (1, 0), (1, 1), (0, 1)])
+    st.SetIndices([0, 1, 2, 3, 0, 1, 2, 3])
+    uv2 = primvars.CreatePrimvar("uv2", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+    uv2.Set([(0, 0), (0.5, 0), (1, 0), (0, 1), (0.5, 1), (1, 1)])
+    UsdGeom.Camera.Define(stage, "/World/Camera").AddTranslateOp().Set(Gf.Vec3d(1.0, 0.5, 3.0))
+    UsdLux.SphereLight.Define(stage, "/World/Light").AddTranslateOp().Set(Gf.Vec3d(0.0, 3.0, 3.0))
+    stage.Save()
+    return bundle / "scene.usda"
+
+
+def test_mesh_texture_coordinates_are_read_and_face_varying_ones_unweld_the_mesh(tmp_path: Path) -> None:
+    scene = import_usd(_strip_stage(tmp_path))
+    mesh = scene.shapes[0]
+    assert isinstance(mesh, MeshShape) and mesh.uvs is not None and mesh.uv_sets is not None
+    vertices, uvs, uv2 = np.array(mesh.vertices_m), np.array(mesh.uvs), np.array(mesh.uv_sets["uv2"])
+    assert len(vertices) == 8 and len(mesh.indices) == 4  # one vertex per face corner, fan-triangulated
+    # every corner keeps its own st: the shared edge x = 1 has u = 1 in the left quad, u = 0 in the right
+    on_edge = np.isclose(vertices[:, 0], 1.0)
+    assert sorted(uvs[on_edge, 0].tolist()) == [0.0, 0.0, 1.0, 1.0]
+    np.testing.assert_allclose(uvs[:, 1], vertices[:, 1])  # v = y on both quads
+    np.testing.assert_allclose(uv2, vertices[:, :2] * [0.5, 1.0])  # the per-point set follows its points
+
+
+def test_textures_environment_and_sun_round_trip_through_usd(tmp_path: Path) -> None:
+    scene = json.loads((EXAMPLES_DIR / "cornell_box.json").read_text())
+    texture = {"type": "image", "path": "t.png", "wrap_u": "mirror", "uv_transform": {"rotation_deg": 30.0}}
+    scene["materials"]["textured"] = {"type": "diffuse", "reflectance": texture}
+    scene["materials"]["film"] = {
+        "type": "thin_film",
+        "film_thickness_um": {
+            "type": "image",
+            "path": "tau.exr",
+            "scale": 1.2,
+            "offset": 0.1,
+            "channel": "g",
+        },
+        "film_ior": 1.33,
+        "substrate": {"ior": 1.0},
+    }
+    scene["materials"]["tinted"] = {
+        "type": "mirror",
+        "conductor": "Au",
+        "tint": {"type": "image", "path": "t.png"},
+    }
+    scene["shapes"].append(
+        {"type": "mesh", "material": "textured", "vertices_m": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+         "indices": [[0, 1, 2]], "uvs": [[0, 0], [1, 0], [0, 1]],
+         "uv_sets": {"uv1": [[0, 0], [2, 0], [0, 2]]}}
+    )  # fmt: skip
+    scene["emitters"] += [
+        {"type": "sun", "direction": [0.2, 1, 0.1], "angular_diameter_deg": 1.0, "irradiance_w_m2": 500.0},
+        {"type": "environment", "path": "sky.exr", "radiance_scale": 0.3,
+         "transform": {"rotate_axis": [0, 1, 0], "rotate_deg": 40.0}},
+    ]  # fmt: skip
+    original = validate_scene(scene)
+    for name, channels in (("t.png", 3), ("tau.exr", 3), ("sky.exr", 3)):
+        write_image(
+            tmp_path / name, np.zeros((2, 4, channels), np.uint8 if name.endswith("png") else np.float32)
+        )
+    scene_to_usd(original, tmp_path / "scene.usda")
+    assert import_usd(tmp_path / "scene.usda").to_json_dict() == original.to_json_dict()
+    (tmp_path / "tau.exr").unlink()  # the importer checks the images the stage names (hg: strings too)
+    with pytest.raises(SceneError) as caught:
+        import_usd(tmp_path / "scene.usda")
+    assert caught.value.problems[0] == {
+        "pointer": "/materials/film/film_thickness_um/path",
+        "message": "path 'tau.exr' is not a file in the bundle",
+    }

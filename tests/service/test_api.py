@@ -97,6 +97,15 @@ def test_malformed_scene_is_422_naming_the_field_and_nothing_is_written(live_ser
         "/v1/jobs", content=b"{not json", headers={"Content-Type": "application/json"}
     )
     assert response.status_code == 422
+    # A JSON scene has no bundle to read a texture from: refused up front, naming the texture's path.
+    textured = tiny_scene()
+    material = next(iter(textured["materials"]))
+    textured["materials"][material] = {"type": "diffuse", "reflectance": {"type": "image", "path": "a.png"}}
+    response = client.http.post("/v1/jobs", json={"scene": textured})
+    assert response.status_code == 422
+    assert response.json()["detail"].startswith(
+        f"scene: /materials/{material}/reflectance/path: image 'a.png'"
+    )
     after = sorted(store_root.rglob("*")) if store_root.exists() else []
     assert after == before
     assert client.list()["total"] == 0

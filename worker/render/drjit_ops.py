@@ -5,6 +5,8 @@ Dr.Jit (``make lint``'s layer contracts); the service runs the same formulas on 
 
 from __future__ import annotations
 
+import dataclasses
+
 import drjit as dr
 
 from hgcore.optics.array_ops import ArrayOps
@@ -12,4 +14,6 @@ from hgcore.optics.array_ops import ArrayOps
 
 def drjit_ops() -> ArrayOps:
     """The Dr.Jit namespace, for the optics formulas inside the integrator's kernels."""
-    return ArrayOps.of("drjit", dr, atan2=dr.atan2, where=dr.select)
+    return dataclasses.replace(
+        ArrayOps.of("drjit", dr, atan2=dr.atan2, where=dr.select), reciprocal_sqrt=dr.rsqrt
+    )

@@ -20,11 +20,18 @@ from hgcore.optics import sources
 
 
 class EmitterKind(IntEnum):
-    SPHERE = 0
+    SPHERE = 0  # also a ``sun``: a sphere far away (scene_compiler.SUN_DISTANCE_M)
     CYLINDER = 1
     RECTANGLE = 2
     DISK = 3
+    #: light from infinitely far in every direction (Mitsuba's ``constant`` or ``envmap``): each path
+    #: carries one direction of it, a plane wave (Σ⊥ = 0; van Cittert–Zernike over the paths' directions)
+    ENVIRONMENT = 4
 
+
+#: The renderer's stand-in for infinity (m): a ``sun`` is a sphere this far away (``scene_compiler``), and
+#: light from the environment is counted as coming from this distance in the diagnostics' r.
+FAR_DISTANCE_M = 1e6
 
 # Record layout of one emitter in the flat table (float32).
 KIND, CENTER, AXIS, UP, RADIUS, LENGTH, WIDTH, HEIGHT = 0, 1, 4, 7, 10, 11, 12, 13
@@ -83,6 +90,14 @@ def emitter_direction(mi: Any, table: Any, emitter_index: Any, receiver: Any) ->
     distance = dr.norm(offset)
     direction = dr.select(distance > 0, offset / dr.maximum(distance, 1e-12), mi.Vector3f(0, 0, 1))
     return distance, direction
+
+
+def emitter_is_environment(mi: Any, table: Any, emitter_index: Any) -> Any:
+    """Whether the emitter is the environment (light from infinity in every direction)."""
+    import drjit as dr
+
+    kind = mi.UInt32(dr.gather(mi.Float, table, emitter_index * STRIDE + KIND))
+    return kind == int(EmitterKind.ENVIRONMENT)
 
 
 def emitter_is_rect(mi: Any, table: Any, emitter_index: Any) -> Any:

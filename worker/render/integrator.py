@@ -27,7 +27,11 @@ incoherent source whose extent is the part of that surface that is lit and seen 
 Cittert–Zernike, docs/physics.md §7). Its points are mutually incoherent, so each path, which reaches one
 point of it, carries a point source (Σ⊥ = 0, phase along the sampled direction); averaging the paths
 gives the partially coherent response of the whole lit patch. A material's explicit
-``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane.
+``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane. The
+environment (light from infinity in every direction, reached by rays that leave the scene) is treated the
+same way: a plane wave from the path's direction per path, van Cittert–Zernike over the paths (docs/physics.md
+§9). Textured material parameters are read at each vertex before its branches (``VertexSpectra``), so the
+coherence maths sees their local values (a film's local thickness sets its shear and phase).
 
 Diagnostics (BRIEF): M = (k/r)²Σ⊥ at λ = 550 nm of the light incident at the first non-specular vertex,
 luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, light
@@ -62,15 +66,18 @@ from worker.render.bsdfs import (
 from worker.render.bsdfs.lobes import mean_over_wavelengths
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import (
+    FAR_DISTANCE_M,
     CylinderModes,
     EmitterKind,
     emitter_coherence,
     emitter_direction,
+    emitter_is_environment,
     emitter_is_rect,
     emitter_rect_modes,
     sphere_solid_angle,
 )
 from worker.render.spectral import cie1931_xyz
+from worker.render.textures import TextureKernels
 from worker.render.wavelength_sampling import lane_weights
 
 # Python integrators subclass variant-specific classes: the variant must be chosen before this import
@@ -114,6 +121,8 @@ class RenderContext:
     cie1931: mi.Float  # Mitsuba's CIE 1931 table as an array of our own (``spectral.cie1931_table``)
     # The open cylinders' view-dependent modes (None: no cylinder, or one mode).
     cylinder_modes: CylinderModes | None = None
+    # The scene's texture lookups (None: no material reads a texture; their tables are the materials').
+    textures: TextureKernels | None = None
 
     def kernel_tables(self) -> list[typing.Any]:
         """The arrays of this context that kernels read (what a frozen pass names as inputs)."""
@@ -148,6 +157,10 @@ class PathResult:
     vcz_weight: mi.Float
     vcz_r: mi.Float
     vcz_direction: mi.Vector3f
+    # Environment light that next-event estimation brings to the first vertex: its luminance and the
+    # direction (camera coordinates) it arrives from, another VCZ sample of the path (zero without one).
+    vcz_direct_weight: mi.Float
+    vcz_direct_direction: mi.Vector3f
     depth_m: mi.Float
     normal: mi.Vector3f
     albedo: mi.Spectrum
@@ -201,6 +214,7 @@ class PendingFilm:
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
     position: mi.Point3f = field(default_factory=lambda: mi.Point3f(0.0))
     normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, 1.0))
+    thickness: mi.Float = field(default_factory=lambda: mi.Float(0.0))  # τ (m) there (a texture's)
     # [R_incoherent, X_1 …] at the sampled direction (linear in the visibilities V_d); none without films
     terms: list[mi.Spectrum] = field(default_factory=list)
 
@@ -252,6 +266,9 @@ class DiagnosticSums:
     moments: CoherenceSample = field(default_factory=CoherenceSample)
     vcz_weight: mi.Float = field(default_factory=lambda: mi.Float(0.0))
     vcz_r: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    # environment light by NEE at the first vertex (at most one per path): luminance, arrival direction
+    vcz_direct_weight: mi.Float = field(default_factory=lambda: mi.Float(0.0))
+    vcz_direct_direction: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, 1.0))
 
     def add(self, weight: mi.Float, sample: CoherenceSample) -> None:
         """Count light of luminance ``weight`` (0 in lanes that do not count) described by ``sample``."""
@@ -270,6 +287,8 @@ class FirstHit:
     depth_m: mi.Float = field(default_factory=lambda: mi.Float(0.0))  # from the centre of projection
     normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
+    # its texture coordinates (kept where textures vary the albedo; read after the loop)
+    uv: mi.Point2f = field(default_factory=lambda: mi.Point2f(0.0))
 
 
 class Vertex(NamedTuple):
@@ -333,7 +352,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             context.disk_coefficients, context.rect_coefficients, bool(context.rect_sources)
         )
         params = MaterialParams(
-            context.material_flat, context.spectra_flat, context.material_table, visibility
+            context.material_flat, context.spectra_flat, context.material_table, visibility, context.textures
         )
         self.kernels = MaterialKernels(params)
 
@@ -381,6 +400,21 @@ class HGPathIntegrator(mi.SamplingIntegrator):
     def _emitter_lookup(self, emitter_ptr: mi.EmitterPtr) -> mi.UInt32:
         registry_id = dr.reinterpret_array(mi.UInt32, emitter_ptr)
         return dr.gather(mi.UInt32, self.context.emitter_index, registry_id)
+
+    def _has_environment(self) -> bool:
+        """Whether the scene has an environment emitter (decided when the kernel is traced): only then do
+        rays that leave the scene reach an emitter."""
+        return EmitterKind.ENVIRONMENT in self.context.emitter_kinds
+
+    def _is_environment(self, em_record: mi.UInt32) -> mi.Bool:
+        """Lanes whose emitter is the environment (always False in scenes without one)."""
+        if not self._has_environment():
+            return mi.Bool(False)
+        return emitter_is_environment(mi, self.context.emitter_flat, em_record)
+
+    def _film_thickness_textured(self) -> bool:
+        """Whether a film's thickness comes from a texture (the pending film then carries its local τ)."""
+        return mat.FILM_THICKNESS_M in self.kernels.params.textured
 
     def _has_sphere_emitters(self) -> bool:
         """Whether the scene has a sphere emitter (decided when the kernel is traced): without one the
@@ -485,6 +519,13 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         record.chain_distance = dr.select(
             vertex.hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
         )
+        # The environment is a plane wave from the path's direction (Σ⊥ = 0, like one point of a secondary
+        # source: the paths' directions sample its van Cittert–Zernike coherence), from "infinitely" far.
+        environment = vertex.hit_emitter & self._is_environment(em_record)
+        if self._has_environment():
+            record.chain_distance = dr.select(
+                environment, record.chain_distance - segment + FAR_DISTANCE_M, record.chain_distance
+            )
         resolved = IncidentCoherence(
             *source_sigma,
             record.chain_distance,
@@ -510,7 +551,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 source_sigma,
                 record.chain_distance,
                 self._screen_angle_terms(*source_sigma, first_vertex.frame_x, first_vertex.frame_y),
-                ~vertex.hit_emitter & ~overridden,
+                (~vertex.hit_emitter & ~overridden) | environment,
             ),
             first_vertex.indirect,
         )
@@ -535,12 +576,14 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         phase_terms = list(film.terms)
         if not self.plane_waves:
             centre_phase = vertex.hit_emitter & ~record.chain_specular & ~film.transmitted
+            centre_phase &= ~self._is_environment(em_record)  # its phase is the path's own direction
 
             def centre_terms(*_: mi.Spectrum) -> list[mi.Spectrum]:
                 table = self.context.emitter_flat
                 _, emitter_to_film = emitter_direction(mi, table, em_record, film.position)
                 cos_centre = -dr.dot(emitter_to_film, film.normal)
-                return list(self.kernels.film_terms(film.material, cos_centre, wavelengths))
+                thickness = film.thickness if self._film_thickness_textured() else None
+                return list(self.kernels.film_terms(film.material, cos_centre, wavelengths, thickness))
 
             def kept(*terms: mi.Spectrum) -> list[mi.Spectrum]:
                 return list(terms)
@@ -586,7 +629,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
             is_film = new_record & self.kernels.is_kind(vertex.kind, mat.INTERFERENCE_KINDS)
             film.pending = dr.select(new_record, is_film, film.pending)
-            thickness = self.kernels.param(vertex.material, mat.FILM_THICKNESS_M)
+            thickness = vertex.spectra.param(mat.FILM_THICKNESS_M)  # the local τ, from a texture
             # The shear between successive beams (docs/physics_interactions.md §3) for light arriving along
             # −wo: from the substrate (wo.z < 0; a transmitting film's frame is not flipped) the incident
             # index is the substrate's, else the exterior's (hero wavelength).
@@ -601,6 +644,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             film.material = dr.select(is_film, vertex.material, film.material)
             film.position = dr.select(is_film, vertex.si.p, film.position)
             film.normal = dr.select(is_film, vertex.frame.n, film.normal)
+            if self._film_thickness_textured():
+                film.thickness = dr.select(is_film, thickness, film.thickness)
             film.transmitted = dr.select(is_film, sampled.film.transmitted, film.transmitted)
             film.terms = dr.select(is_film, list(sampled.film.terms), list(film.terms))
         # Through a perfect mirror / refraction the carried vectors follow the beam.
@@ -707,6 +752,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         has_film = kernels.has(mat.INTERFERENCE_KINDS)
         has_nee_only = kernels.has(mat.NEE_ONLY_KINDS)
         coherence_materials = has_film or has_nee_only  # materials whose value depends on Σ⊥
+        has_environment = self._has_environment()
         span_nm = self.context.bands.wavelength_max_nm - self.context.bands.wavelength_min_nm
 
         wavelengths = mi.Spectrum(ray.wavelengths)
@@ -737,9 +783,12 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             kind = kernels.kind(material)
             # Before the bounce's symbolic branches, so that sampling, NEE and the pending record share
             # them (``VertexSpectra``).
-            spectra = kernels.vertex_spectra(material, wavelengths)
-            emitter_ptr = si.emitter(scene, valid)
-            hit_emitter = valid & (emitter_ptr != None)  # noqa: E711 - Dr.Jit pointer comparison
+            spectra = kernels.vertex_spectra(material, wavelengths, si)
+            # A ray that leaves the scene reaches the environment, where there is one (Mitsuba's
+            # ``si.emitter`` returns it for invalid interactions).
+            reaches = active if has_environment else valid
+            emitter_ptr = si.emitter(scene, reaches)
+            hit_emitter = reaches & (emitter_ptr != None)  # noqa: E711 - Dr.Jit pointer comparison
             specular = valid & kernels.is_specular(material) & ~hit_emitter
             nonspecular = valid & ~specular & ~hit_emitter
             nee_only = kernels.is_kind(kind, mat.NEE_ONLY_KINDS)
@@ -750,6 +799,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             aov.depth_m = dr.select(first_hit, dr.norm(si.p - self.context.camera_position), aov.depth_m)
             aov.normal = dr.select(first_hit, si.sh_frame.n, aov.normal)
             aov.material = dr.select(first_hit, material, aov.material)
+            if kernels.textured:
+                aov.uv = dr.select(first_hit, si.uv, aov.uv)
 
             # ---------------------- Shading frame (two-sided except transmitting interfaces) ------
             frame = mi.Frame3f(si.sh_frame)
@@ -834,8 +885,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
             # and a thin film's interference phase; the sampled point serves the radiometric terms only.
             wo_centre = wo_em
+            environment_nee = self._is_environment(em_record_nee)  # no centre: the sampled direction
             if coherence_materials and not self.plane_waves:
-                wo_centre = frame.to_local(-nee_geometry[1])
+                wo_centre = dr.select(environment_nee, wo_em, frame.to_local(-nee_geometry[1]))
             wo_eval = wo_em
             if has_nee_only:
                 wo_eval = dr.select(nee_only, wo_centre, wo_em)
@@ -854,6 +906,15 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # ``add`` each (the other adds zero), for a third of the arithmetic.
             direct_first = do_nee & ~first_vertex.seen
             counts = direct_first | (first_vertex.indirect_ready & first_vertex.seen)
+            if has_environment:
+                # Environment light by NEE at the first vertex is a VCZ sample with its own arrival
+                # direction (the path's other one is the direction sampled from the first vertex).
+                environment_first = direct_first & environment_nee
+                counts &= ~environment_first
+                environment_luminance = dr.select(environment_first, _luminance(y_weights, direct), 0.0)
+                sums.vcz_direct_weight += environment_luminance
+                sums.vcz_r += environment_luminance * FAR_DISTANCE_M
+                sums.vcz_direct_direction = dr.select(environment_first, ds_em.d, sums.vcz_direct_direction)
             sums.add(
                 dr.select(counts, _luminance(y_weights, emitted + direct), 0.0),
                 dr.select(direct_first, direct_sample, first_vertex.indirect),
@@ -899,9 +960,13 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             sums.vcz_weight,
             sums.vcz_r,
             self._camera_coordinates(first_vertex.direction),
+            sums.vcz_direct_weight,
+            self._camera_coordinates(sums.vcz_direct_direction),
             aov.depth_m,
             aov.normal,
-            kernels.albedo(aov.material, wavelengths),
+            kernels.textured_albedo(aov.material, wavelengths, aov.uv)
+            if kernels.textured
+            else kernels.albedo(aov.material, wavelengths),
         )
 
 

@@ -53,7 +53,25 @@ MAX_ORDER = 20
 DISPERSIVE = 21  # 1 when the dielectric index varies with wavelength
 FILM_TRANSMITS = 22  # 1 for a thin film on a dielectric substrate (reflects and transmits)
 FILM_EXTINCTION = 23  # the film's extinction κ_f (constant over wavelength; 0: a clear film)
-STRIDE = 24
+TINT_ID = 24  # a conductor's colour tint spectrum (mirrors, rough conductors: 0 where there is none)
+# Texture bindings (``worker.render.textures``) of the textured parameters: binding + 1, 0 for none.
+TEX_REFLECTANCE = 25
+TEX_TINT = 26
+TEX_ROUGHNESS = 27
+TEX_CORRELATION = 28
+TEX_THICKNESS = 29
+STRIDE = 30
+
+#: The parameters a texture may give, and the offset of each one's binding. Colours (spectral ids) become
+#: the texture's upsampled spectra, scalars its values in SI units.
+TEXTURE_BINDINGS = {
+    REFLECTANCE_ID: TEX_REFLECTANCE,
+    TINT_ID: TEX_TINT,
+    ROUGHNESS_RMS_M: TEX_ROUGHNESS,
+    CORRELATION_LENGTH_M: TEX_CORRELATION,
+    FILM_THICKNESS_M: TEX_THICKNESS,
+}
+COLOUR_PARAMETERS = frozenset({REFLECTANCE_ID, TINT_ID})
 
 # 0: no override; a non-specular vertex is a secondary source sized by the lit patch (docs/physics.md §7).
 DEFAULT_SCATTERING_REGION_RADIUS_M = 0.0
@@ -83,6 +101,12 @@ class MaterialRecord:
     kind: MaterialKind
     values: dict[int, float] = field(default_factory=dict)
     model: RoughSurface | BinaryGrating | None = None
+    #: parameter offset → (smallest, largest) value of its texture (SI units), for the textured parameters
+    texture_ranges: dict[int, tuple[float, float]] = field(default_factory=dict)
+
+    def textured(self, offset: int) -> bool:
+        """Whether parameter ``offset`` comes from a texture (``TEXTURE_BINDINGS``)."""
+        return self.values.get(TEXTURE_BINDINGS[offset], 0.0) > 0.0
 
     def as_row(self) -> np.ndarray:
         row = np.zeros(STRIDE, dtype=np.float32)
@@ -116,6 +140,17 @@ class MaterialTable:
     def max_beams(self) -> int:
         beams = [int(r.values.get(BEAMS, 0)) for r in self.records if r.kind == MaterialKind.THIN_FILM]
         return max(beams, default=0)
+
+    def textured_parameters(self) -> frozenset[int]:
+        """The parameters (``TEXTURE_BINDINGS`` keys) some material of the scene reads from a texture:
+        only their lookups are traced, so that scenes without textures trace none."""
+        return frozenset(
+            offset for offset in TEXTURE_BINDINGS for record in self.records if record.textured(offset)
+        )
+
+    def tinted(self) -> bool:
+        """Whether some conductor of the scene has a tint (else no tint spectrum is looked up)."""
+        return any(TINT_ID in record.values or record.textured(TINT_ID) for record in self.records)
 
     def film_absorbing(self) -> bool:
         """Whether some thin film of the scene absorbs (κ_f > 0): only then do the kernels carry a complex

@@ -43,6 +43,7 @@ from worker.render.integrator import RenderContext, register
 from worker.render.rlt import integrator_class
 from worker.render.scene_compiler import CompiledScene
 from worker.render.spectral import cie1931_table, cie1931_xyz
+from worker.render.textures import TextureKernels
 from worker.render.wavelength_sampling import WavelengthSampler, lane_weights, scene_density
 
 log = logging.getLogger(__name__)
@@ -156,6 +157,11 @@ class Renderer:
             if key in compiled.emitter_records:
                 emitter_id = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(shape.emitter()))[0])
                 emitter_ids[emitter_id] = compiled.emitter_records[key]
+        environment = self.scene.environment()
+        if environment is not None and compiled.environment_record is not None:
+            emitter_ids[int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(environment))[0])] = (
+                compiled.environment_record
+            )
         emitter_index = np.zeros(max(emitter_ids, default=0) + 1, dtype=np.uint32)
         for registry_id, record in emitter_ids.items():
             emitter_index[registry_id] = record
@@ -184,7 +190,15 @@ class Renderer:
             camera_up=camera_up,
             camera_position=camera_position,
             cie1931=cie1931_table(mi),
+            textures=None if compiled.texture_table is None else TextureKernels(mi, compiled.texture_table),
         )
+
+    def _environment_vcz(self, result: Any) -> tuple[Any, Any]:
+        """(weight, direction) of environment light by NEE at the first vertex, or (None, None) in scenes
+        without an environment (nothing traced)."""
+        if EmitterKind.ENVIRONMENT not in self.integrator.context.emitter_kinds:
+            return None, None
+        return result.vcz_direct_weight, result.vcz_direct_direction
 
     def _screen_axes(self) -> tuple[list[float], list[float]]:
         """World directions of the image's +x (right) and up, from rays through the image centre."""
@@ -399,7 +413,12 @@ class Renderer:
             "diag_r": result.diag_r,
             "diag_c2": result.diag_cos2,
             "diag_s2": result.diag_sin2,
-            **vcz_sums(result.vcz_weight, result.vcz_r, result.vcz_direction),
+            **vcz_sums(
+                result.vcz_weight,
+                result.vcz_r,
+                result.vcz_direction,
+                *self._environment_vcz(result),
+            ),
             "depth": result.depth_m,
             "normal_x": result.normal.x,
             "normal_y": result.normal.y,
@@ -428,16 +447,32 @@ def _collector_paused() -> Iterator[None]:
             gc.enable()
 
 
-def vcz_sums(weight: Any, weighted_r: Any, direction: Any) -> dict[str, Any]:
+def vcz_sums(
+    weight: Any,
+    weighted_r: Any,
+    direction: Any,
+    direct_weight: Any = None,
+    direct_direction: Any = None,
+) -> dict[str, Any]:
     """Per-sample terms of the secondary-source estimator (``output.secondary_source_m``): the weight w, w²
-    (for the effective sample count), w·r, and w·d, w·ddᵀ of the arrival direction d."""
-    d = (direction.x, direction.y, direction.z)
-    terms = {"vcz_w": weight, "vcz_w2": dr.square(weight), "vcz_r": weighted_r}
-    for i, axis in enumerate("xyz"):
-        terms[f"vcz_d{axis}"] = weight * d[i]
-        for j in range(i, 3):
-            terms[f"vcz_d{axis}{'xyz'[j]}"] = weight * d[i] * d[j]
-    return terms
+    (for the effective sample count), w·r, and w·d, w·ddᵀ of the arrival direction d; with
+    ``direct_weight``/``direct_direction`` (environment light by next-event estimation) a second weighted
+    direction of the same sample, counted as its own VCZ sample (w² and the moments add)."""
+
+    def sample_terms(w: Any, vector: Any) -> dict[str, Any]:
+        d = (vector.x, vector.y, vector.z)
+        terms = {"vcz_w": w, "vcz_w2": dr.square(w)}
+        for i, axis in enumerate("xyz"):
+            terms[f"vcz_d{axis}"] = w * d[i]
+            for j in range(i, 3):
+                terms[f"vcz_d{axis}{'xyz'[j]}"] = w * d[i] * d[j]
+        return terms
+
+    terms = sample_terms(weight, direction)
+    if direct_weight is not None:
+        direct = sample_terms(direct_weight, direct_direction)
+        terms = {key: value + direct[key] for key, value in terms.items()}
+    return {**terms, "vcz_r": weighted_r}
 
 
 class RenderCanceledError(Exception):

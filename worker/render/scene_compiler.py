@@ -22,15 +22,34 @@ from hgcore.artifacts.layout import BandLayout
 from hgcore.errors import InputError
 from hgcore.optics import ior as ior_data
 from hgcore.optics.grating import BinaryGrating
+from hgcore.optics.rgb_upsampling import fit_coefficients, sigmoid_polynomial
 from hgcore.optics.rough_surface import RoughSurface
+from hgcore.settings import SceneLimits
 from schemas import scene as model
-from schemas.photometry import evaluate_spectrum
+from schemas.errors import json_pointer
+from schemas.photometry import emitter_radiance_scale, evaluate_spectrum
 from schemas.procedural import GENERATORS, generate_mesh
+from schemas.textures import ImageHeader, check_scene_images
 from worker.render import materials as mat
-from worker.render.emitters import EmitterKind, EmitterRecord, EmitterTable
+from worker.render.emitters import FAR_DISTANCE_M, EmitterKind, EmitterRecord, EmitterTable
 from worker.render.spectral import SpectralTable, grid_wavelengths_nm
+from worker.render.textures import TextureTable, coefficient_table, decode_image, uv_affine
 
 EMITTER_SPECTRUM_STEP_NM = 1.0
+SUN_DISTANCE_M = FAR_DISTANCE_M
+"""How far a ``sun`` is placed: a sphere of radius D·sin α at D along its direction subtends the sun's
+angular radius α from the origin. From a point x of the scene its centre is off by at most |x|/D: 1e-5 rad
+at 10 m, 0.2 % of the sun's 4.6e-3 rad, and float32 keeps the sphere's surface to ~0.1 m of its 4.6 km
+radius (docs/physics.md §9)."""
+#: Ranges (SI) that textured values are clipped to: film thickness, RMS roughness, correlation length.
+TEXTURE_RANGES_SI = {
+    mat.FILM_THICKNESS_M: (0.0, model.MAX_FILM_THICKNESS_UM * 1e-6),
+    mat.ROUGHNESS_RMS_M: (0.0, model.MAX_ROUGHNESS_RMS_UM * 1e-6),
+    mat.CORRELATION_LENGTH_M: (
+        model.MIN_CORRELATION_LENGTH_UM * 1e-6,
+        model.MAX_CORRELATION_LENGTH_UM * 1e-6,
+    ),
+}
 
 
 @dataclass
@@ -44,6 +63,10 @@ class CompiledScene:
     emitter_table: EmitterTable
     shape_materials: dict[str, int]  # Mitsuba shape id -> material index
     emitter_records: dict[str, int]  # Mitsuba shape id of an emitter -> emitter record index
+    #: the textures' bindings (None: the scene has none)
+    texture_table: TextureTable | None = None
+    #: the environment emitter's record index (None: no environment)
+    environment_record: int | None = None
 
 
 def spectrum_on(spectrum: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
@@ -96,10 +119,60 @@ def _compose(mi: Any, transform: model.Transform | None, own: list[list[float]] 
 class SceneCompiler:
     """Builds ``CompiledScene`` objects; ``bundle_dir`` resolves mesh files of uploaded bundles."""
 
-    def __init__(self, mi: Any, bundle_dir: Path | None = None) -> None:
+    def __init__(self, mi: Any, bundle_dir: Path | None = None, limits: SceneLimits | None = None) -> None:
         self.mi = mi
         self.bundle_dir = bundle_dir
+        self.limits = limits if limits is not None else SceneLimits()
         self.grid_nm = grid_wavelengths_nm()
+        # Per compile: the images the scene reads (checked from their headers), decoded on first use.
+        self._images: dict[str, tuple[Path, ImageHeader]] = {}
+        self._decoded: dict[tuple[str, str], np.ndarray] = {}
+        self._textures = TextureTable()
+
+    # ------------------------------------------------------------------ textures
+    def _image(self, path: str, colour_space: str) -> np.ndarray:
+        """The bundle image ``path`` as float32 RGBA, decoded once per colour space."""
+        key = (path, colour_space)
+        if key not in self._decoded:
+            file, header = self._images[path]
+            self._decoded[key] = decode_image(file, header, colour_space)
+        return self._decoded[key]
+
+    def _scalar_texture(
+        self,
+        record_values: dict[int, float],
+        ranges: dict[int, tuple[float, float]],
+        offset: int,
+        value: Any,
+        unit: float,
+    ) -> None:
+        """Parameter ``offset`` of a record: a number (× ``unit`` into SI) or a texture, whose binding goes
+        to the record and whose mean value stands in for the constant (the Mitsuba reference's, and the
+        rough-surface model's where only the other parameter is textured)."""
+        if not isinstance(value, model.ImageTexture):
+            record_values[offset] = value * unit
+            return
+        low, high = TEXTURE_RANGES_SI[offset]
+        image = self._image(value.path, value.color_space)
+        binding, smallest, largest = self._textures.add_scalar(value, image, unit, low, high)
+        record_values[mat.TEXTURE_BINDINGS[offset]] = binding + 1.0
+        ranges[offset] = (smallest, largest)
+        record_values[offset] = max(0.5 * (smallest + largest), low if low > 0.0 else 1e-12)
+
+    def _colour_texture(
+        self, values: dict[int, float], offset: int, texture: model.ImageTexture, spectra: SpectralTable
+    ) -> np.ndarray:
+        """A colour parameter from a texture: its binding, and its mean colour's spectrum as the constant
+        (what a lane without texture coordinates would read). Returns the texture's linear sRGB."""
+        if self._textures.coefficients is None:
+            self._textures.coefficients = coefficient_table()
+        image = self._image(texture.path, texture.color_space)
+        binding, rgb = self._textures.add_colour(texture, image)
+        values[mat.TEXTURE_BINDINGS[offset]] = binding + 1.0
+        mean_rgb = rgb.reshape(-1, 3).mean(axis=0, dtype=np.float64)[None]
+        c = fit_coefficients(mean_rgb, self._textures.coefficients)[0]
+        values[offset] = spectra.add(sigmoid_polynomial((c[0], c[1], c[2]), self.grid_nm))
+        return rgb
 
     # ------------------------------------------------------------------ materials
     def _material_record(
@@ -107,8 +180,18 @@ class SceneCompiler:
     ) -> tuple[mat.MaterialRecord, dict]:
         grid = self.grid_nm
         values: dict[int, float] = {}
+        ranges: dict[int, tuple[float, float]] = {}
         if getattr(material, "scattering_region_radius_m", None) is not None:
             values[mat.SCATTERING_REGION_RADIUS_M] = material.scattering_region_radius_m
+
+        def record(kind: mat.MaterialKind, surface: Any = None) -> mat.MaterialRecord:
+            return mat.MaterialRecord(kind, values, surface, ranges)
+
+        def tint(m: Any) -> None:
+            if isinstance(m.tint, model.ImageTexture):
+                self._colour_texture(values, mat.TINT_ID, m.tint, spectra_table)
+            elif m.tint is not None:
+                values[mat.TINT_ID] = spectra_table.add(np.clip(spectrum_on(m.tint, grid), 0, 1))
 
         def conductor(name: str) -> None:
             n, kappa, _ = _ior_on_grid(name, grid)
@@ -122,22 +205,25 @@ class SceneCompiler:
             values[mat.DISPERSIVE] = float(dispersive)
 
         def rough(m: Any) -> RoughSurface:
-            values[mat.ROUGHNESS_RMS_M] = m.roughness_rms_um * 1e-6
-            values[mat.CORRELATION_LENGTH_M] = m.correlation_length_um * 1e-6
+            self._scalar_texture(values, ranges, mat.ROUGHNESS_RMS_M, m.roughness_rms_um, 1e-6)
+            self._scalar_texture(values, ranges, mat.CORRELATION_LENGTH_M, m.correlation_length_um, 1e-6)
             return RoughSurface(
-                m.roughness_rms_um * 1e-6, m.correlation_length_um * 1e-6, m.psd, m.psd_exponent
+                values[mat.ROUGHNESS_RMS_M], values[mat.CORRELATION_LENGTH_M], m.psd, m.psd_exponent
             )
 
         kind = material.type
         if kind == "diffuse":
-            values[mat.REFLECTANCE_ID] = spectra_table.add(
-                np.clip(spectrum_on(material.reflectance, grid), 0, 1)
-            )
-            return mat.MaterialRecord(mat.MaterialKind.DIFFUSE, values), {
-                "type": "diffuse",
-                "reflectance": self._mitsuba_spectrum(material.reflectance, clip=True),
-            }
+            if isinstance(material.reflectance, model.ImageTexture):
+                rgb = self._colour_texture(values, mat.REFLECTANCE_ID, material.reflectance, spectra_table)
+                reflectance_reference = self._mitsuba_bitmap(material.reflectance, rgb)
+            else:
+                values[mat.REFLECTANCE_ID] = spectra_table.add(
+                    np.clip(spectrum_on(material.reflectance, grid), 0, 1)
+                )
+                reflectance_reference = self._mitsuba_spectrum(material.reflectance, clip=True)
+            return record(mat.MaterialKind.DIFFUSE), {"type": "diffuse", "reflectance": reflectance_reference}
         if kind == "mirror":
+            tint(material)
             if material.conductor == "perfect":
                 values[mat.ETA_ID] = spectra_table.add_constant(0.0)
                 values[mat.KAPPA_ID] = spectra_table.add_constant(1e6)  # |r| = 1 at every angle
@@ -145,7 +231,7 @@ class SceneCompiler:
             else:
                 conductor(material.conductor)
                 reference = {"type": "conductor", "material": material.conductor}
-            return mat.MaterialRecord(mat.MaterialKind.MIRROR, values), reference
+            return record(mat.MaterialKind.MIRROR), reference
         if kind == "dielectric":
             dielectric(material.ior)
             values[mat.EXTERIOR_IOR] = material.exterior_ior
@@ -154,7 +240,7 @@ class SceneCompiler:
                 if isinstance(material.ior, float)
                 else float(ior_data.spectral_ior(material.ior, 550.0)[0])
             )
-            return mat.MaterialRecord(mat.MaterialKind.DIELECTRIC, values), {
+            return record(mat.MaterialKind.DIELECTRIC), {
                 "type": "dielectric",
                 "int_ior": ior_value,
                 "ext_ior": material.exterior_ior,
@@ -162,13 +248,14 @@ class SceneCompiler:
         placeholder = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.5, 0.5]}}
         if kind == "rough_conductor":
             conductor(material.conductor)
-            return mat.MaterialRecord(mat.MaterialKind.ROUGH_CONDUCTOR, values, rough(material)), placeholder
+            tint(material)
+            return record(mat.MaterialKind.ROUGH_CONDUCTOR, rough(material)), placeholder
         if kind == "rough_dielectric":
             dielectric(material.ior)
             values[mat.EXTERIOR_IOR] = material.exterior_ior
-            return mat.MaterialRecord(mat.MaterialKind.ROUGH_DIELECTRIC, values, rough(material)), placeholder
+            return record(mat.MaterialKind.ROUGH_DIELECTRIC, rough(material)), placeholder
         if kind == "thin_film":
-            values[mat.FILM_THICKNESS_M] = material.film_thickness_um * 1e-6
+            self._scalar_texture(values, ranges, mat.FILM_THICKNESS_M, material.film_thickness_um, 1e-6)
             values[mat.FILM_IOR_ID] = spectra_table.add(_ior_on_grid(material.film_ior, grid)[0])
             values[mat.BEAMS] = float(material.beams)
             if material.film_extinction > 0.0:
@@ -178,7 +265,7 @@ class SceneCompiler:
             else:
                 dielectric(material.substrate.ior)
                 values[mat.FILM_TRANSMITS] = 1.0
-            return mat.MaterialRecord(mat.MaterialKind.THIN_FILM, values, rough(material)), placeholder
+            return record(mat.MaterialKind.THIN_FILM, rough(material)), placeholder
         if kind == "grating":
             conductor(material.conductor)
             values[mat.ORIENTATION_RAD] = math.radians(material.orientation_deg)
@@ -191,8 +278,31 @@ class SceneCompiler:
                 lobe_width_per_um=material.lobe_width_per_um,
                 max_order=max(material.max_order, 1),
             )
-            return mat.MaterialRecord(mat.MaterialKind.GRATING, values, grating), placeholder
+            return record(mat.MaterialKind.GRATING, grating), placeholder
         raise InputError(f"materials: type {kind!r} is not supported by the renderer")
+
+    def _mitsuba_bitmap(self, texture: model.ImageTexture, rgb: np.ndarray) -> dict[str, Any]:
+        """The texture as Mitsuba's ``bitmap`` (for the reference scene): the same linear sRGB (after
+        scale/offset), upsampled by Mitsuba's own table; Mitsuba's v runs down the image, hence the flip in
+        ``to_uv``. Mitsuba has one wrap mode for both axes and no ``black``: other textures fall back to
+        their mean colour."""
+        mi = self.mi
+        affine = np.asarray(uv_affine(texture)[:6]).reshape(2, 3)
+        if texture.wrap_u != texture.wrap_v or texture.wrap_u == "black":
+            return {"type": "rgb", "value": rgb.reshape(-1, 3).mean(axis=0).tolist()}
+        # Mitsuba looks up (u', 1 − v') for our uv' = A·(u, v, 1) (its si.uv is ours: see _shape_dict).
+        flip = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 1.0], [0.0, 0.0, 1.0]])
+        to_uv = flip @ np.vstack([affine, [0.0, 0.0, 1.0]])
+        matrix = np.eye(4)
+        matrix[:2, :2], matrix[:2, 3] = to_uv[:2, :2], to_uv[:2, 2]
+        return {
+            "type": "bitmap",
+            "bitmap": mi.Bitmap(np.ascontiguousarray(rgb, dtype=np.float32)),
+            "raw": False,
+            "filter_type": texture.filter,
+            "wrap_mode": texture.wrap_u,
+            "to_uv": mi.ScalarTransform4f(matrix.tolist()),
+        }
 
     def _mitsuba_spectrum(self, spectrum: Any, clip: bool = False) -> dict[str, Any]:
         wavelengths = np.arange(300.0, 1000.0 + EMITTER_SPECTRUM_STEP_NM, EMITTER_SPECTRUM_STEP_NM)
@@ -207,7 +317,7 @@ class SceneCompiler:
         }
 
     # ------------------------------------------------------------------ geometry
-    def _shape_dict(self, shape: Any) -> dict[str, Any]:
+    def _shape_dict(self, shape: Any, uv_set: str = "st") -> dict[str, Any]:
         mi = self.mi
         kind = shape.type
         if kind == "sphere":
@@ -231,32 +341,39 @@ class SceneCompiler:
             own = _frame_matrix(shape.center_m, shape.normal, None, shape.radius_m, shape.radius_m)
             return {"type": "disk", "to_world": _compose(mi, shape.transform, own)}
         if kind == "mesh" or kind in GENERATORS:
-            return self._inline_mesh(shape)
+            return self._inline_mesh(shape, uv_set)
         if kind == "mesh_file":
             if self.bundle_dir is None:
                 raise InputError(f"shapes: mesh file {shape.path!r} needs an uploaded bundle")
             path = (self.bundle_dir / shape.path).resolve()
             if self.bundle_dir.resolve() not in path.parents:
                 raise InputError(f"shapes: mesh file {shape.path!r} escapes the bundle")
-            return {
+            mesh = {
                 "type": path.suffix.lstrip(".").lower(),
                 "filename": str(path),
                 "to_world": _compose(mi, shape.transform, None),
             }
+            if mesh["type"] == "obj":
+                # Keep the file's (u, v), origin bottom-left (hgrender's convention, schemas.scene):
+                # Mitsuba's OBJ loader stores (u, 1 − v) unless told not to.
+                mesh["flip_tex_coords"] = False
+            return mesh
         raise InputError(f"shapes: type {kind!r} is not supported by the renderer")
 
-    def _inline_mesh(self, shape: Any) -> Any:
+    def _inline_mesh(self, shape: Any, uv_set: str = "st") -> Any:
         """An ``mi.Mesh`` of an inline or procedural mesh, the shape's transform applied to its vertices.
 
         Procedural meshes carry texture coordinates: Mitsuba's first shading tangent follows ∂p/∂u, which
-        is what orients anisotropic materials (an optical disc's concentric grating tracks).
+        is what orients anisotropic materials (an optical disc's concentric grating tracks). An inline
+        mesh carries its set ``uv_set`` (the one its material's textures read), if it has it.
         """
         mi = self.mi
         if shape.type == "mesh":
             vertices = np.asarray(shape.vertices_m, dtype=np.float64)
             faces = np.asarray(shape.indices, dtype=np.uint32)
             normals = None if shape.normals is None else np.asarray(shape.normals, dtype=np.float64)
-            uvs = None
+            sets = shape.texture_coordinate_sets()
+            uvs = np.asarray(sets[uv_set], dtype=np.float64) if uv_set in sets else None
         else:
             generated = generate_mesh(shape)
             vertices, faces = generated.vertices_m, generated.triangles.astype(np.uint32)
@@ -331,19 +448,44 @@ class SceneCompiler:
             own = _frame_matrix(emitter.center_m, emitter.normal, None, emitter.radius_m, emitter.radius_m)
             shape = {"type": "disk", "to_world": self.mi.ScalarTransform4f(own)}
             return shape, record, math.pi * emitter.radius_m**2
+        if kind == "sun":
+            # A sphere at SUN_DISTANCE_M subtending the sun's angular radius α: Mitsuba samples its cone and
+            # the integrator its stable solid angle; its coherence is the sphere's, a uniform disk of angular
+            # radius α (Σ⊥/r² = sin²α/4: ℓ = 2/(k sin α)).
+            direction = _normalized(emitter.direction)
+            half_angle = math.radians(emitter.angular_diameter_deg) / 2.0
+            radius = SUN_DISTANCE_M * math.sin(half_angle)
+            center = tuple((direction * SUN_DISTANCE_M).tolist())
+            record = EmitterRecord(EmitterKind.SPHERE, center, radius_m=radius)
+            shape = {"type": "sphere", "center": list(center), "radius": radius}
+            return shape, record, 4 * math.pi * radius**2
         raise InputError(f"emitters: type {kind!r} is not supported by the renderer")
 
-    def _radiance(self, emitter: Any, area_m2: float, film: model.Film) -> dict[str, Any]:
+    def _environment(self, emitter: model.EnvironmentEmitter, index: int) -> dict[str, Any]:
+        """Mitsuba's ``constant`` (L = c·s(λ)) or ``envmap`` (lat-long, importance-sampled by its
+        luminance × sin θ; RGB upsampled × D65) emitter of the environment, turned by its transform."""
+        mi = self.mi
+        to_world = np.eye(4)
+        if emitter.transform is not None:
+            to_world[:3, :3] = np.asarray(emitter.transform.to_matrix())[:3, :3]
+        if emitter.path is None:
+            return {
+                "type": "constant",
+                "radiance": self._radiance_values(emitter.spectrum, emitter.radiance_scale),
+            }
+        rgba = self._image(emitter.path, "auto")
+        if not np.all(np.isfinite(rgba[..., :3])) or np.any(rgba[..., :3] < 0.0):
+            raise InputError(f"/emitters/{index}/path: the image has negative or non-finite values")
+        return {
+            "type": "envmap",
+            "bitmap": mi.Bitmap(np.ascontiguousarray(rgba[..., :3], dtype=np.float32)),
+            "scale": emitter.radiance_scale,
+            "to_world": mi.ScalarTransform4f(to_world.tolist()),
+        }
+
+    def _radiance_values(self, spectrum: Any, scale: float) -> dict[str, Any]:
         wavelengths = np.arange(200.0, 2500.0 + EMITTER_SPECTRUM_STEP_NM, EMITTER_SPECTRUM_STEP_NM)
-        values = spectrum_on(emitter.spectrum, wavelengths)
-        if emitter.power_w is not None:
-            inside = (wavelengths >= film.wavelength_min_nm) & (wavelengths <= film.wavelength_max_nm)
-            integral = float(np.trapezoid(values[inside], wavelengths[inside]))
-            if integral <= 0:
-                raise InputError("emitters: spectrum integrates to zero over the film's wavelength range")
-            scale = emitter.power_w / (math.pi * area_m2 * integral)
-        else:
-            scale = emitter.radiance_scale
+        values = spectrum_on(spectrum, wavelengths)
         return {
             "type": "regular",
             "wavelength_min": float(wavelengths[0]),
@@ -351,23 +493,43 @@ class SceneCompiler:
             "values": ",".join(f"{v * scale:.9g}" for v in values),
         }
 
+    def _radiance(self, emitter: Any, area_m2: float, film: model.Film) -> dict[str, Any]:
+        wavelengths = np.arange(200.0, 2500.0 + EMITTER_SPECTRUM_STEP_NM, EMITTER_SPECTRUM_STEP_NM)
+        values = spectrum_on(emitter.spectrum, wavelengths)
+        if isinstance(emitter, model.SunEmitter):
+            scale = emitter_radiance_scale(emitter, film.wavelength_min_nm, film.wavelength_max_nm)
+        elif emitter.power_w is not None:
+            inside = (wavelengths >= film.wavelength_min_nm) & (wavelengths <= film.wavelength_max_nm)
+            integral = float(np.trapezoid(values[inside], wavelengths[inside]))
+            if integral <= 0:
+                raise InputError("emitters: spectrum integrates to zero over the film's wavelength range")
+            scale = emitter.power_w / (math.pi * area_m2 * integral)
+        else:
+            scale = emitter.radiance_scale
+        return self._radiance_values(emitter.spectrum, scale)
+
     # ------------------------------------------------------------------ whole scene
     def compile(self, scene: model.Scene) -> CompiledScene:
         mi = self.mi
         film = scene.film
         camera = scene.camera
+        self._images = check_scene_images(scene, self.bundle_dir, self.limits)
+        self._decoded, self._textures = {}, TextureTable()
         if camera.to_world is not None:
             camera_to_world = mi.ScalarTransform4f(camera.to_world)
         else:
             camera_to_world = mi.ScalarTransform4f().look_at(
                 origin=camera.origin_m, target=camera.target_m, up=camera.up
             )
+        far_clip = camera.far_clip_m
+        if any(isinstance(emitter, model.SunEmitter) for emitter in scene.emitters):
+            far_clip = max(far_clip, 2.0 * SUN_DISTANCE_M)  # the camera sees the sun's disk
         sensor = {
             "type": "perspective",
             "fov": camera.horizontal_fov_deg(),
             "fov_axis": "x",
             "near_clip": camera.near_clip_m,
-            "far_clip": camera.far_clip_m,
+            "far_clip": far_clip,
             "to_world": camera_to_world,
             "film": {
                 "type": "hdrfilm",
@@ -386,6 +548,11 @@ class SceneCompiler:
             record, reference = self._material_record(material, spectral_table)
             material_index[name] = material_table.add(record)
             references[name] = reference
+        if material_table.tinted():  # every conductor then reads a tint: 1 where it has none
+            for record in material_table.records:
+                conductor = record.kind in (mat.MaterialKind.MIRROR, mat.MaterialKind.ROUGH_CONDUCTOR)
+                if conductor and mat.TINT_ID not in record.values:
+                    record.values[mat.TINT_ID] = spectral_table.add_constant(1.0)
         black_index = material_table.add(mat.MaterialRecord(mat.MaterialKind.BLACK))
 
         hg_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
@@ -393,7 +560,8 @@ class SceneCompiler:
         shape_materials: dict[str, int] = {}
         for index, shape in enumerate(scene.shapes):
             key = f"shape_{index}"
-            shape_dict = self._shape_dict(shape)
+            uv_set = _texture_uv_set(scene, shape, index)
+            shape_dict = self._shape_dict(shape, uv_set)
             shape_materials[key] = material_index[shape.material]
             if isinstance(shape_dict, dict):
                 hg_dict[key] = {**shape_dict, "bsdf": {"type": "diffuse"}}
@@ -401,11 +569,18 @@ class SceneCompiler:
             else:  # an inline mi.Mesh instance; its id names it like the dictionary shapes
                 shape_dict.set_id(key)
                 hg_dict[key] = shape_dict
-                reference_dict[key] = self._inline_mesh_with_bsdf(shape, references[shape.material], key)
+                reference = references[shape.material]
+                reference_dict[key] = self._inline_mesh_with_bsdf(shape, reference, key, uv_set)
         emitter_table = EmitterTable()
         emitter_records: dict[str, int] = {}
+        environment_record = None
         black = {"type": "diffuse", "reflectance": {"type": "spectrum", "value": 0.0}}
         for index, emitter in enumerate(scene.emitters):
+            if isinstance(emitter, model.EnvironmentEmitter):
+                environment_record = len(emitter_table.records)
+                emitter_table.records.append(EmitterRecord(EmitterKind.ENVIRONMENT, (0.0, 0.0, 0.0)))
+                hg_dict["environment"] = reference_dict["environment"] = self._environment(emitter, index)
+                continue
             key = f"emitter_{index}"
             shape_dict, record, area = self._emitter(emitter, film)
             emitter_records[key] = len(emitter_table.records)
@@ -429,10 +604,36 @@ class SceneCompiler:
             emitter_table,
             shape_materials,
             emitter_records,
+            texture_table=self._textures if len(self._textures) else None,
+            environment_record=environment_record,
         )
 
-    def _inline_mesh_with_bsdf(self, shape: Any, bsdf: dict, key: str) -> Any:
-        mesh = self._inline_mesh(shape)
+    def _inline_mesh_with_bsdf(self, shape: Any, bsdf: dict, key: str, uv_set: str) -> Any:
+        mesh = self._inline_mesh(shape, uv_set)
         mesh.set_id(key)
         mesh.set_bsdf(self.mi.load_dict(bsdf))
         return mesh
+
+
+def _texture_uv_set(scene: model.Scene, shape: Any, index: int) -> str:
+    """The texture coordinate set a shape's material's textures read (``st`` without textures); one per
+    material, and a shape other than an inline mesh has only ``st``."""
+    material = scene.materials[shape.material]
+    textures = {
+        name: getattr(material, name)
+        for name in type(material).model_fields
+        if isinstance(getattr(material, name), model.ImageTexture)
+    }
+    sets = {texture.uv_set for texture in textures.values()}
+    if len(sets) > 1:
+        pointer = json_pointer(["materials", shape.material])
+        message = f"its textures read different uv sets {sorted(sets)}; use one per material"
+        raise InputError(f"{pointer}: {message}")
+    uv_set = sets.pop() if sets else "st"
+    available = shape.texture_coordinate_sets() if isinstance(shape, model.MeshShape) else {"st": []}
+    if textures and uv_set not in available:
+        name = next(n for n, t in textures.items() if t.uv_set == uv_set)
+        where = json_pointer(["materials", shape.material, name, "uv_set"])
+        has = ", ".join(sorted(available)) or "none"
+        raise InputError(f"{where}: shape /shapes/{index} has no uv set {uv_set!r} (it has: {has})")
+    return uv_set

@@ -92,8 +92,9 @@ def cie1931_xyz(mi, table, wavelengths_nm):
     return tuple(result)
 
 
-def lookup(mi, table, spectrum_id, wavelengths):
-    """Interpolate spectrum ``spectrum_id`` (UInt32 per lane) of ``table`` at ``wavelengths`` (nm)."""
+def lookup(mi, table, spectrum_id, wavelengths, active=True):
+    """Interpolate spectrum ``spectrum_id`` (UInt32 per lane) of ``table`` at ``wavelengths`` (nm) in the
+    lanes ``active`` (0 elsewhere)."""
     import drjit as dr
 
     result = mi.Spectrum(0.0)
@@ -102,7 +103,7 @@ def lookup(mi, table, spectrum_id, wavelengths):
         position = dr.clip((wavelengths[j] - GRID_MIN_NM) / GRID_STEP_NM, 0.0, GRID_SIZE - 1.001)
         index = mi.UInt32(dr.floor(position))
         fraction = position - mi.Float(index)
-        lower = dr.gather(mi.Float, table, base + index)
-        upper = dr.gather(mi.Float, table, base + index + 1)
+        lower = dr.gather(mi.Float, table, base + index, active)
+        upper = dr.gather(mi.Float, table, base + index + 1, active)
         result[j] = dr.lerp(lower, upper, fraction)
     return result

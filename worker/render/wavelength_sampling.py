@@ -66,6 +66,7 @@ from hgcore.artifacts.layout import BandLayout
 from hgcore.colour import band_edges_xyz_weights
 from hgcore.errors import InputError
 from schemas.photometry import emitter_area_m2, emitter_radiance_scale, evaluate_spectrum
+from schemas.scene import D65Spectrum, EnvironmentEmitter, SunEmitter
 
 WITHIN_BAND_FLOOR = 0.2  # f: the uniform share of the density inside a band
 BAND_MASS_FLOOR = 0.5  # g: the uniform share of the band masses
@@ -86,12 +87,21 @@ QUANTILE_INTERVALS = 4096
 
 def emitted_spectral_power(scene: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
     """Φ(λ) = Σ_e π·A_e·c_e·s_e(λ) in W·nm⁻¹ at ``wavelengths_nm``: each emitter's Lambertian radiance
-    c·s(λ) (``schemas.photometry``) times π and its emitting area."""
+    c·s(λ) (``schemas.photometry``) times π and its emitting area. Emitters at infinity count the irradiance
+    they give one square metre facing them: a sun Ω·c·s(λ), an environment π·c·s(λ) (an image's colours
+    are upsampled with D65: its spectral shape is taken as D65's)."""
     film = scene.film
     power = np.zeros(np.shape(wavelengths_nm))
     for emitter in scene.emitters:
         scale = emitter_radiance_scale(emitter, film.wavelength_min_nm, film.wavelength_max_nm)
+        if isinstance(emitter, EnvironmentEmitter):
+            spectrum_model = emitter.spectrum if emitter.spectrum is not None else D65Spectrum(type="d65")
+            power += math.pi * scale * evaluate_spectrum(spectrum_model, wavelengths_nm)
+            continue
         spectrum = evaluate_spectrum(emitter.spectrum, wavelengths_nm)
+        if isinstance(emitter, SunEmitter):
+            power += emitter.solid_angle_sr() * scale * spectrum
+            continue
         power += math.pi * emitter_area_m2(emitter) * scale * spectrum
     return power
 

@@ -30,9 +30,11 @@ import mitsuba as mi
 from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_reflectance
+from hgcore.optics.rough_surface import RoughSurface
 from worker.render import materials as mat
 from worker.render.drjit_ops import drjit_ops
 from worker.render.spectral import lookup
+from worker.render.textures import TextureKernels
 
 OPS = drjit_ops()
 
@@ -119,12 +121,18 @@ class MaterialParams:
         spectra: mi.Float,
         materials: mat.MaterialTable,
         visibility: VisibilityModel,
+        textures: TextureKernels | None = None,
     ) -> None:
         self.table = table
         self.spectra = spectra
         self.materials = materials
         #: μ of the incident light, for the kinds that interfere (thin films)
         self.visibility = visibility
+        #: the scene's texture lookups, and the parameters some material reads from a texture
+        self.textures = textures
+        self.textured = materials.textured_parameters() if textures is not None else frozenset()
+        #: some conductor has a tint (``materials.TINT_ID``): only then is a tint looked up
+        self.tinted = materials.tinted()
         #: beams of the partially coherent film sums (the largest of the scene's films, at least two)
         self.max_beams = max(materials.max_beams(), 2)
         #: some film absorbs: the film index is complex, n_f + iκ_f (``materials.FILM_EXTINCTION``)
@@ -133,12 +141,18 @@ class MaterialParams:
     def param(self, material: mi.UInt32, offset: int) -> mi.Float:
         return dr.gather(mi.Float, self.table, material * mat.STRIDE + offset)
 
-    def spectrum(self, material: mi.UInt32, offset: int, wavelengths: mi.Spectrum) -> mi.Spectrum:
+    def spectrum(
+        self, material: mi.UInt32, offset: int, wavelengths: mi.Spectrum, active: mi.Bool | bool = True
+    ) -> mi.Spectrum:
         spectrum_id = mi.UInt32(self.param(material, offset))
-        return lookup(mi, self.spectra, spectrum_id, wavelengths)
+        return lookup(mi, self.spectra, spectrum_id, wavelengths, active)
 
     def kind(self, material: mi.UInt32) -> mi.UInt32:
         return mi.UInt32(self.param(material, mat.KIND))
+
+    def tint(self, reflectance: mi.Spectrum, spectra: VertexSpectra) -> mi.Spectrum:
+        """A conductor's reflectance times its tint (``materials.TINT_ID``), where a scene has tints."""
+        return reflectance * spectra[mat.TINT_ID] if self.tinted else reflectance
 
     def interface_reflectance(self, spectra: VertexSpectra, cos_theta: mi.Float | float) -> mi.Spectrum:
         """Unpolarised Fresnel reflectance F(θ) of the (conductor or substrate) interface of the material
@@ -184,17 +198,65 @@ class VertexSpectra:
         material: mi.UInt32,
         wavelengths: mi.Spectrum,
         offsets: Iterable[int] = (),
+        uv: mi.Point2f | None = None,
+        active: mi.Bool | bool = True,
     ) -> None:
         self.params = params
         self.material = material
         self.wavelengths = wavelengths
-        self._looked_up = {offset: params.spectrum(material, offset, wavelengths) for offset in offsets}
+        # Textured parameters at the vertex's texture coordinates ``uv`` (lanes ``active``): (the lanes
+        # whose material has the texture, its value there). Without ``uv`` no texture is read.
+        self._textured: dict[int, tuple[mi.Bool, mi.Float | mi.Spectrum]] = {}
+        if uv is not None:
+            for offset in sorted(params.textured):
+                self._textured[offset] = self._texture(offset, uv, active)
+        self._looked_up = {offset: self._spectrum(offset) for offset in offsets}
+
+    def _texture(
+        self, offset: int, uv: mi.Point2f, active: mi.Bool | bool
+    ) -> tuple[mi.Bool, mi.Float | mi.Spectrum]:
+        """(the lanes whose material has a texture for parameter ``offset``, its value there at ``uv``)."""
+        params, wavelengths = self.params, self.wavelengths
+        binding = params.param(self.material, mat.TEXTURE_BINDINGS[offset])
+        has_texture = active & (binding > 0.5)
+        index = mi.UInt32(dr.maximum(binding - 1.0, 0.0))
+        colour = offset in mat.COLOUR_PARAMETERS
+
+        def look_up(_: mi.Float | mi.Spectrum) -> tuple[mi.Float | mi.Spectrum]:
+            if colour:
+                return (params.textures.reflectance(index, uv, wavelengths, has_texture),)
+            return (params.textures.scalar(index, uv, has_texture),)
+
+        # A symbolic branch: packets without a lane of a textured material skip the lookup.
+        (value,) = dr.if_stmt(
+            (mi.Spectrum(0.0) if colour else mi.Float(0.0),),
+            has_texture,
+            look_up,
+            lambda kept: (kept,),
+            label=f"texture_{offset}",
+        )
+        return has_texture, value
+
+    def _spectrum(self, offset: int) -> mi.Spectrum:
+        textured = self._textured.get(offset)
+        if textured is None:
+            return self.params.spectrum(self.material, offset, self.wavelengths)
+        # the table's spectrum only where the material has no texture (its gathers skip the other lanes)
+        value = self.params.spectrum(self.material, offset, self.wavelengths, ~textured[0])
+        return dr.select(textured[0], textured[1], value)
 
     def __getitem__(self, offset: int) -> mi.Spectrum:
         value = self._looked_up.get(offset)
         if value is None:
-            return self.params.spectrum(self.material, offset, self.wavelengths)
+            return self._spectrum(offset)
         return value
+
+    def param(self, offset: int) -> mi.Float:
+        """A scalar parameter of the vertex's material: its texture's value where it has one (SI units),
+        else the table's."""
+        value = self.params.param(self.material, offset)
+        textured = self._textured.get(offset)
+        return value if textured is None else dr.select(textured[0], textured[1], value)
 
 
 class ShadingPoint(NamedTuple):
@@ -247,6 +309,19 @@ class Material:
         """The branch's name in Dr.Jit's IR (symbolic branches)."""
         suffix = "" if self.index is None else f"[{self.index}]"
         return f"{self.kind.name.lower()}{suffix}"
+
+    def surface(self, point: ShadingPoint) -> RoughSurface:
+        """The material's rough surface (``model``) at ``point``: σ_h and ℓ_c from its textures where it
+        has them (per lane, ``RoughSurface.local``), else the model's constants (compiled in)."""
+        record, model = self.record, self.model
+        rms_textured = record.textured(mat.ROUGHNESS_RMS_M)
+        length_textured = record.textured(mat.CORRELATION_LENGTH_M)
+        if not (rms_textured or length_textured):
+            return model
+        return model.local(
+            point.spectra.param(mat.ROUGHNESS_RMS_M) if rms_textured else model.rms_height_m,
+            point.spectra.param(mat.CORRELATION_LENGTH_M) if length_textured else model.correlation_length_m,
+        )
 
     def selects(self, material: mi.UInt32, kind: mi.UInt32) -> mi.Bool:
         """Lanes whose material this branch handles."""

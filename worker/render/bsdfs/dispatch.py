@@ -65,6 +65,8 @@ class MaterialKernels:
                 self.branches += [cls(self.params, index) for index in materials.indices_of(kind)]
             else:
                 self.branches.append(cls(self.params))
+        if not params.tinted:
+            offsets.discard(mat.TINT_ID)
         #: the spectra the scene's kinds read at a vertex (``vertex_spectra``)
         self.spectrum_offsets = tuple(sorted(offsets))
         #: whether a kind of the scene samples with hero-dependent probabilities (``common.Material``)
@@ -75,8 +77,11 @@ class MaterialKernels:
         ]
 
     def kernel_tables(self) -> list[mi.Float]:
-        """Every array the material kernels read: the material and spectral tables and the kinds' own."""
+        """Every array the material kernels read: the material, spectral and texture tables and the
+        kinds' own."""
         tables = [self.params.table, self.params.spectra]
+        if self.params.textures is not None:
+            tables += self.params.textures.kernel_tables()
         for branch in self.branches:
             tables += branch.kernel_tables()
         return tables
@@ -113,15 +118,38 @@ class MaterialKernels:
             transmits |= film & (self.param(material, mat.FILM_TRANSMITS) > 0.5)
         return ~transmits
 
-    def vertex_spectra(self, material: mi.UInt32, wavelengths: mi.Spectrum) -> VertexSpectra:
-        """The spectra of a vertex's ``material`` that the scene's kinds read, looked up once for the
-        bounce (``common.VertexSpectra``)."""
-        return VertexSpectra(self.params, material, wavelengths, self.spectrum_offsets)
+    @property
+    def textured(self) -> bool:
+        """Whether some material of the scene reads a parameter from a texture (decided when traced)."""
+        return bool(self.params.textured)
 
-    def albedo(self, material: mi.UInt32, wavelengths: mi.Spectrum) -> mi.Spectrum:
-        """Directional-hemispherical reflectance at normal incidence, for the albedo AOV."""
+    def vertex_spectra(
+        self, material: mi.UInt32, wavelengths: mi.Spectrum, si: mi.SurfaceInteraction3f | None = None
+    ) -> VertexSpectra:
+        """The spectra of a vertex's ``material`` that the scene's kinds read, looked up once for the
+        bounce (``common.VertexSpectra``), and its textured parameters at the hit ``si``'s texture
+        coordinates where the scene has textures."""
+        # Mitsuba's uv is hgrender's (origin bottom-left, v up): OBJ files load with flip_tex_coords off.
+        uv = None
+        if si is not None and self.textured:
+            uv = mi.Point2f(si.uv)
+        valid = True if si is None else si.is_valid()
+        return VertexSpectra(self.params, material, wavelengths, self.spectrum_offsets, uv, valid)
+
+    def textured_albedo(self, material: mi.UInt32, wavelengths: mi.Spectrum, uv: mi.Point2f) -> mi.Spectrum:
+        """The albedo AOV (``albedo``) of ``material`` at texture coordinates ``uv`` (a textured scene's
+        first hit, kept by the path), its textures read once per path after the loop."""
+        spectra = VertexSpectra(self.params, material, wavelengths, (), uv)
+        return self.albedo(material, wavelengths, spectra)
+
+    def albedo(
+        self, material: mi.UInt32, wavelengths: mi.Spectrum, spectra: VertexSpectra | None = None
+    ) -> mi.Spectrum:
+        """Directional-hemispherical reflectance at normal incidence, for the albedo AOV (``spectra``: the
+        vertex's, with its textures; None: the material's untextured values)."""
         kind = self.kind(material)
-        spectra = VertexSpectra(self.params, material, wavelengths)
+        if spectra is None:
+            spectra = VertexSpectra(self.params, material, wavelengths)
         diffuse = self.is_kind(kind, frozenset({mat.MaterialKind.DIFFUSE}))
         value = dr.select(diffuse, spectra[mat.REFLECTANCE_ID], 0.0)
         if not self.kinds - {mat.MaterialKind.DIFFUSE, mat.MaterialKind.BLACK}:
@@ -129,9 +157,16 @@ class MaterialKernels:
         reflective = ~diffuse & ~self.is_kind(kind, frozenset({mat.MaterialKind.BLACK}))
         return dr.select(reflective, self.params.interface_reflectance(spectra, 1.0), value)
 
-    def film_terms(self, material: mi.UInt32, cos_i: mi.Float, wavelengths: mi.Spectrum) -> list[mi.Spectrum]:
-        """A thin film's terms [R_incoherent, X_1 …] at incidence cos_i (``thin_film.film_terms``)."""
-        return film_terms(VertexSpectra(self.params, material, wavelengths), cos_i)
+    def film_terms(
+        self,
+        material: mi.UInt32,
+        cos_i: mi.Float,
+        wavelengths: mi.Spectrum,
+        thickness_m: mi.Float | None = None,
+    ) -> list[mi.Spectrum]:
+        """A thin film's terms [R_incoherent, X_1 …] at incidence cos_i (``thin_film.film_terms``);
+        ``thickness_m``: its local τ where it differs from the material's (a texture)."""
+        return film_terms(VertexSpectra(self.params, material, wavelengths), cos_i, thickness_m)
 
     # ---------------------------------------------------------------- evaluation and sampling
     def eval_pdf(

@@ -8,8 +8,11 @@ thin film (``thin_film.ThinFilm``) is the same interface with the film's reflect
 
 from __future__ import annotations
 
+import math
+
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from hgcore.optics import rough_surface
 from worker.render import materials as mat
@@ -28,21 +31,32 @@ from worker.render.bsdfs.lobes import mean_over_wavelengths, specular_or_lobe, s
 class RoughConductor(Material):
     kind = mat.MaterialKind.ROUGH_CONDUCTOR
     per_material = True
-    spectra = (mat.ETA_ID, mat.KAPPA_ID)
+    spectra = (mat.ETA_ID, mat.KAPPA_ID, mat.TINT_ID)
     model: rough_surface.RoughSurface
 
     def __init__(self, params: MaterialParams, index: int | None = None) -> None:
         super().__init__(params, index)
-        # The propagating fraction P on a (sin θ, λ) grid (``_reflection_fraction``), built once per surface.
-        self._fraction_table = mi.Float(rough_surface.reflection_fraction_table(self.model).ravel())
+        # The propagating fraction P on a (sin θ, λ) grid (``_reflection_fraction``), built once per surface;
+        # with a textured ℓ_c on a (sin θ, ℓ_c/λ) grid over the texture's range and the spectral grid's.
+        self._ratio_nodes: np.ndarray | None = None
+        if self.record.textured(mat.CORRELATION_LENGTH_M):
+            low, high = self.record.texture_ranges[mat.CORRELATION_LENGTH_M]
+            self._ratio_nodes = rough_surface.ratio_table_nodes(
+                low / rough_surface.TABLE_WAVELENGTHS_M[-1], high / rough_surface.TABLE_WAVELENGTHS_M[0]
+            )
+            table = rough_surface.reflection_fraction_ratio_table(self.model, self._ratio_nodes)
+        else:
+            table = rough_surface.reflection_fraction_table(self.model)
+        self._fraction_table = mi.Float(table.ravel())
 
     def kernel_tables(self) -> list[mi.Float]:
         return [self._fraction_table]
 
     def reflectance(self, point: ShadingPoint, wo: mi.Vector3f) -> list[mi.Spectrum]:
-        """The interface's reflectance terms for light arriving along ``wo``: [F(θ_i)] for a conductor (the
-        first term is the incoherent reflectance that scales both parts)."""
-        return [self.params.interface_reflectance(point.spectra, point.wi.z)]
+        """The interface's reflectance terms for light arriving along ``wo``: [F(θ_i)·tint] for a conductor
+        (the first term is the incoherent reflectance that scales both parts)."""
+        fresnel = self.params.interface_reflectance(point.spectra, point.wi.z)
+        return [self.params.tint(fresnel, point.spectra)]
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         sampled, _ = self.sample_reflection(point, sample1, sample2)
@@ -62,14 +76,14 @@ class RoughConductor(Material):
         Harvey–Shack's incident-side factors (1 − e^{−g}, the propagating fraction) are those of the side
         the path arrives from, ``wi``. ``reflectance`` is the caller's F (conductors: at ``wi``).
         """
-        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
+        surface, wi, wavelengths = self.surface(point), point.wi, point.wavelengths
         value = mi.Spectrum(0.0)
         pdfs = mi.Spectrum(0.0)
         light, view = vec(wo), vec(wi)
         sin_view = dr.sqrt(dr.maximum(wi.x * wi.x + wi.y * wi.y, 0.0))
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
-            fraction = self._reflection_fraction(sin_view, wavelengths[j])
+            fraction = self._reflection_fraction(sin_view, wavelengths[j], surface)
             brdf = rough_surface.rough_reflection_eval(
                 surface, view, light, wavelength_m, reflectance[j], OPS, fraction=fraction
             )
@@ -77,18 +91,28 @@ class RoughConductor(Material):
             pdfs[j] = rough_surface.rough_reflection_pdf(surface, view, light, wavelength_m, OPS)
         return value, pdfs
 
-    def _reflection_fraction(self, sin_theta: mi.Float, wavelength_nm: mi.Float) -> mi.Float:
+    def _reflection_fraction(
+        self, sin_theta: mi.Float, wavelength_nm: mi.Float, surface: rough_surface.RoughSurface
+    ) -> mi.Float:
         """Propagating fraction P of reflection in air, bilinear in ``reflection_fraction_table`` (built once
-        per surface): 4 gathers instead of a 32-node angular integral per wavelength and sample."""
+        per surface): 4 gathers instead of a 32-node angular integral per wavelength and sample. With a
+        textured ℓ_c the second axis is ln(ℓ_c/λ) (``reflection_fraction_ratio_table``)."""
         table = self._fraction_table
-        columns = len(rough_surface.TABLE_WAVELENGTHS_M)
-        first = float(rough_surface.TABLE_WAVELENGTHS_M[0]) * 1e9
-        last = float(rough_surface.TABLE_WAVELENGTHS_M[-1]) * 1e9
+        if self._ratio_nodes is None:
+            columns = len(rough_surface.TABLE_WAVELENGTHS_M)
+            first = float(rough_surface.TABLE_WAVELENGTHS_M[0]) * 1e9
+            last = float(rough_surface.TABLE_WAVELENGTHS_M[-1]) * 1e9
+            column_position = (wavelength_nm - first) / (last - first)
+        else:
+            columns = len(self._ratio_nodes)
+            low, high = math.log(self._ratio_nodes[0]), math.log(self._ratio_nodes[-1])
+            ratio = surface.correlation_length_m / (wavelength_nm * 1e-9)
+            column_position = (dr.log(ratio) - low) / (high - low)
         # Invert sin θ = 1 − (1 − x)², then cell coordinates along both axes.
         x = 1.0 - dr.sqrt(dr.maximum(1.0 - sin_theta, 0.0))
         rows = rough_surface.TABLE_ANGLE_NODES
         row_f = dr.clip(x * (rows - 1), 0.0, rows - 1.001)
-        column_f = dr.clip((wavelength_nm - first) / (last - first) * (columns - 1), 0.0, columns - 1.001)
+        column_f = dr.clip(column_position * (columns - 1), 0.0, columns - 1.001)
         row, column = mi.UInt32(row_f), mi.UInt32(column_f)
         a, b = row_f - mi.Float(row), column_f - mi.Float(column)
 
@@ -110,7 +134,7 @@ class RoughConductor(Material):
         The mean is a one-sample MIS over the wavelengths: every weight is at most 4·F_j/F. Returns the
         sample and the reflectance terms (``reflectance``) at the sampled direction.
         """
-        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
+        surface, wi, wavelengths = self.surface(point), point.wi, point.wavelengths
         hero_m = wavelengths[0] * 1e-9
         specular_probability = mean_over_wavelengths(
             [

@@ -47,7 +47,7 @@ class RoughDielectric(Material):
         """f·|cos θo| and per-wavelength densities p_k of the scattered lobes (light arriving along wo). p_k
         is that of ``sample`` with hero λ_k (selection probability R_k or T_k × lobe density), so a lobe
         sample's weight is a constant."""
-        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
+        surface, wi, wavelengths = self.surface(point), point.wi, point.wavelengths
         outside, n_camera, n_other = self._camera_side(point)
         side = dr.select(outside, 1.0, -1.0)
         view = mi.Vector3f(wi.x, wi.y, wi.z * side)
@@ -104,7 +104,7 @@ class RoughDielectric(Material):
         the smooth dielectric does); radiance scales by (n_camera/n_light)² across the interface. The pdf
         ratios q_k (``common``): R_k/R_hero (T_k/T_hero) for the specular part, p_k/p̄ for the lobe (its
         p_k already hold R_k or T_k)."""
-        surface, wi, wavelengths = self.model, point.wi, point.wavelengths
+        surface, wi, wavelengths = self.surface(point), point.wi, point.wavelengths
         outside, n_camera, n_other = self._camera_side(point)
         side = dr.select(outside, 1.0, -1.0)
         view = mi.Vector3f(wi.x, wi.y, wi.z * side)

@@ -40,14 +40,18 @@ from worker.render.bsdfs.common import (
 from worker.render.bsdfs.rough_conductor import RoughConductor
 
 
-def film_terms(spectra: VertexSpectra, cos_i: mi.Float) -> list[mi.Spectrum]:
+def film_terms(
+    spectra: VertexSpectra, cos_i: mi.Float, thickness_m: mi.Float | None = None
+) -> list[mi.Spectrum]:
     """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i of the film
     whose spectra are ``spectra``, with every beam (``hgcore.optics.thin_film.film_reflectance_terms``). The
     film's index is n_f + iκ_f where a film of the scene absorbs (``MaterialParams.film_absorbing``), else
-    the real n_f as before."""
+    the real n_f as before. ``thickness_m``: the film's local thickness τ (default: the vertex's, from its
+    texture where it has one)."""
     params, material, wavelengths = spectra.params, spectra.material, spectra.wavelengths
     exterior = params.param(material, mat.EXTERIOR_IOR)
-    thickness_m = params.param(material, mat.FILM_THICKNESS_M)
+    if thickness_m is None:
+        thickness_m = spectra.param(mat.FILM_THICKNESS_M)
     film_n = spectra[mat.FILM_IOR_ID]
     film_kappa = params.param(material, mat.FILM_EXTINCTION) if params.film_absorbing else None
     substrate_n = spectra[mat.ETA_ID]
@@ -115,7 +119,7 @@ class ThinFilm(RoughConductor):
         terms = film_terms(point.spectra, wo_phase.z)
         # Direct light reaches the film from the exterior side (``eval_domain``): the shear of light
         # arriving along −wo_phase with the exterior's index (``hgcore.optics.thin_film.film_shear``).
-        thickness_m = self.params.param(point.material, mat.FILM_THICKNESS_M)
+        thickness_m = point.spectra.param(mat.FILM_THICKNESS_M)
         film_ior = point.spectra[mat.FILM_IOR_ID][0]
         exterior = self.params.param(point.material, mat.EXTERIOR_IOR)
         light_world = point.frame.to_world(wo_phase)
