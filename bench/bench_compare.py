@@ -32,6 +32,10 @@ SIZE_PX, SPP, BANDS, REPEATS = 128, 64, 16, 3
 def _probe(scene_name: str) -> float:
     """Median seconds of REPEATS timed renders of ``scene_name`` in this process (after warm-up)."""
     from schemas.validation import validate_scene
+    from worker import mitsuba_setup
+
+    if hasattr(mitsuba_setup, "configure_mitsuba"):  # older trees chose the variant when imported
+        mitsuba_setup.configure_mitsuba("llvm_ad_spectral")
     from worker.render.api import renderer_for
 
     data = json.loads((ROOT / "schemas" / "examples" / scene_name).read_text())

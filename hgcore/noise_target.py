@@ -31,7 +31,6 @@ import numpy as np
 from hgcore.artifacts.pixel_sums import PixelSums
 from hgcore.errors import InputError
 
-RECORD_FIELDS = ("target_rel_error", "time_budget_s", "target_quantile")
 MIN_ROUND_FRACTION = 1 / 16
 MAX_ROUND_GROWTH = 8
 
@@ -69,21 +68,6 @@ class NoiseTarget:
         if rel_error is None and time_budget_s is None and quantile is None:
             return None
         return cls(rel_error, time_budget_s, quantile)
-
-    def record_fields(self) -> dict[str, str]:
-        """The target as a job record's text fields (absent parts: empty)."""
-        return {
-            name: "" if value is None else repr(float(value))
-            for name, value in zip(
-                RECORD_FIELDS, (self.rel_error, self.time_budget_s, self.quantile), strict=True
-            )
-        }
-
-    @classmethod
-    def from_record(cls, record: dict[str, str]) -> NoiseTarget | None:
-        """The target of a job record (``record_fields``), or None for a fixed-spp job."""
-        values = [float(record[name]) if record.get(name) else None for name in RECORD_FIELDS]
-        return cls.from_options(*values)
 
     @property
     def metric(self) -> str:

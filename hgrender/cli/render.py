@@ -97,16 +97,18 @@ def load_scene_file(path: Path) -> tuple[dict, Path | None]:
 
 def run(args: argparse.Namespace) -> int:
     import contextlib
-    import os
 
-    if args.variant:
-        os.environ["HGRENDER_VARIANT"] = args.variant
+    from hgcore.settings import Settings
+    from worker.mitsuba_setup import configure_mitsuba
+
+    settings = Settings()  # this process's one: scene limits, Mitsuba variant and thread count
+    configure_mitsuba(args.variant or settings.variant, settings.render_threads)
     scene, bundle_dir = load_scene_file(args.scene)
     from hgcore.noise_target import NoiseTarget
     from schemas.validation import validate_scene
     from worker.render.api import render_scene
 
-    parsed = validate_scene(scene)
+    parsed = validate_scene(scene, settings)
     target = NoiseTarget.from_options(args.target_rel_error, args.time_budget_s, args.target_quantile)
     chunks = args.chunks if args.chunks is not None else (TEV_DEFAULT_CHUNKS if args.tev else 1)
     with contextlib.ExitStack() as stack:

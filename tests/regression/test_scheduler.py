@@ -19,12 +19,12 @@ from pathlib import Path
 import pytest
 import redis
 
+from hgcore.regression.models import ScheduleCreate, Suite, SuiteScene
+from hgcore.regression.store import RegressionStore
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from hgrender.cli.service import worker_command_line
 from service.redis_server import RedisServer
-from service.regression.models import ScheduleCreate, Suite, SuiteScene
-from service.regression.store import RegressionStore
 
 INTERVAL_S = 2
 

@@ -22,6 +22,7 @@ from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.sources import source_coefficients, sphere_covariance_components
 from hgcore.optics.thin_film import film_shear
+from schemas import validate_scene
 from tests.render import scenes
 from tests.render.exr import read_channels, spectral_stack
 from tests.render.fringes import FringeFit, fit_fringe_visibility, two_beam_band_terms
@@ -35,7 +36,7 @@ def band_edges_nm(bands: int, range_nm: tuple[float, float]) -> np.ndarray:
 
 
 def render(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> dict[str, np.ndarray]:
-    render_scene(scene, out_dir, seed=seed)
+    render_scene(validate_scene(scene), out_dir, seed=seed)
     return read_channels(out_dir / "image.exr")
 
 

@@ -12,7 +12,7 @@ from urllib.parse import urlsplit
 import httpx
 import pytest
 
-from tests.service.conftest import LiveService
+from tests.support.live_service import LiveService
 
 ARTIFACTS_DIR = Path(__file__).resolve().parents[2] / "test-artifacts"
 LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "::1"}

@@ -48,7 +48,7 @@ from hgcore.artifacts.layout import K_REFERENCE_PER_M, BandLayout
 from hgcore.optics import sources
 from hgcore.optics.frames import transverse_frame_components
 from hgcore.optics.thin_film import film_shear
-from worker.mitsuba_setup import load_mitsuba
+from worker.mitsuba_setup import configured_mitsuba
 from worker.render import materials as mat
 from worker.render.bsdfs import (
     IncidentCoherence,
@@ -73,9 +73,9 @@ from worker.render.emitters import (
 from worker.render.spectral import cie1931_xyz
 from worker.render.wavelength_sampling import lane_weights
 
-# Python integrators subclass variant-specific classes: the variant must be chosen before this import
-# (``load_mitsuba`` honours HGRENDER_VARIANT; ``auto`` picks cuda_ad_spectral when a GPU is usable).
-mi = load_mitsuba()
+# Python integrators subclass variant-specific classes: the process's entry point chose the variant before
+# this import (``worker.mitsuba_setup.configure_mitsuba``, from its settings); importing changes nothing.
+mi = configured_mitsuba()
 OPS = drjit_ops()
 
 T = typing.TypeVar("T")
