@@ -31,7 +31,7 @@ from hgcore.jobs.record import JobRecord
 from hgcore.regression.evaluation import RunEvaluator
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
-from schemas.scene import Scene
+from schemas import Scene, validate_scene
 from worker.horse import bound_settings, horse_work_dir
 from worker.step_monitor import CancelPoll, ProgressReporter, RoundPreviews
 
@@ -86,15 +86,22 @@ def _fail_on_last_attempt(horse: _Horse, job_id: str, error: str) -> None:
         horse.lifecycle.fail(job_id, error)
 
 
-def _inputs(lifecycle: JobLifecycle, job_id: str, work_dir: Path) -> tuple[Scene, Path | None]:
-    """The job's scene (validated when the job was submitted; typed here) and, for an uploaded bundle,
-    the local folder its files were copied to (the renderer resolves relative file paths against it)."""
+def _scene(horse: _Horse, job_id: str) -> Scene:
+    """The job's scene, validated against this worker's limits (the API's may differ) into the typed
+    model every step then passes on."""
+    return validate_scene(horse.lifecycle.scene(job_id), horse.settings)
+
+
+def _inputs(horse: _Horse, job_id: str, work_dir: Path) -> tuple[Scene, Path | None]:
+    """The job's scene and, for an uploaded bundle, the local folder its files were copied to (the
+    renderer resolves the scene's relative file paths against it)."""
+    store = horse.lifecycle.store
     inputs_prefix = input_prefix(job_id)
     bundle_dir = work_dir / "input"
-    inputs = lifecycle.store.list(inputs_prefix)
+    inputs = store.list(inputs_prefix)
     for info in inputs:
-        lifecycle.store.get_file(info.key, bundle_dir / info.key.removeprefix(inputs_prefix))
-    return Scene.model_validate(lifecycle.scene(job_id)), bundle_dir if inputs else None
+        store.get_file(info.key, bundle_dir / info.key.removeprefix(inputs_prefix))
+    return _scene(horse, job_id), bundle_dir if inputs else None
 
 
 def _start_chunk(
@@ -106,7 +113,7 @@ def _start_chunk(
 
     chunk = plan_chunks(record.spp, record.chunk_count, record.seed)[chunk_index]
     horse.lifecycle.start_chunk(record.id, chunk_index, horse.worker_name, os.getpid(), chunk.spp)
-    scene, bundle_dir = _inputs(horse.lifecycle, record.id, work_dir)
+    scene, bundle_dir = _inputs(horse, record.id, work_dir)
     return chunk, scene, bundle_dir, CancelPoll(horse.lifecycle, record.id)
 
 
@@ -217,8 +224,9 @@ def merge_task(job_id: str) -> dict[str, Any]:
             for index, path in enumerate(chunk_paths):
                 horse.lifecycle.store.get_file(chunk_key(job_id, index), path)
             out_dir = work_dir / "out"
-            scene = Scene.model_validate(horse.lifecycle.scene(job_id))
-            summary = merge_chunks(scene, chunk_paths, out_dir, extra_summary={"job_id": job_id})
+            summary = merge_chunks(
+                _scene(horse, job_id), chunk_paths, out_dir, extra_summary={"job_id": job_id}
+            )
             return horse.lifecycle.finalize(job_id, out_dir, summary, merge_started_s)
     except StepFailedError as error:
         _fail_on_last_attempt(horse, job_id, str(error))
