@@ -9,7 +9,7 @@ from typing import Any
 
 from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.progress import ProgressDisplay
-from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TEV_DEFAULT, TevImage, tev_address
+from hgrender.cli.tev import TevImage, add_tev_option
 
 # With --tev and no --chunks, the render is split into this many chunks (at most spp) so that tev shows
 # the image refine as each chunk is added.
@@ -37,15 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("auto", "llvm_ad_spectral", "cuda_ad_spectral"),
         help="Mitsuba variant (default: HGRENDER_VARIANT or auto)",
     )
-    parser.add_argument(
-        "--tev",
-        nargs="?",
-        const=DEFAULT_TEV_ADDRESS,
-        default=None,
-        type=tev_address,
-        metavar="HOST:PORT",
-        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated after every chunk",
-    )
+    add_tev_option(parser, "after every chunk")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=run)
 

@@ -213,16 +213,23 @@ def _kill_horse_of_attempt(service: LiveService, job_id: str, attempt: int) -> N
     os.kill(service.steps(job_id).chunks[0].pid, signal.SIGKILL)
 
 
+def _one_chunk_job_whose_horses_die(service: LiveService, worker_name: str, attempts: int) -> tuple[Any, str]:
+    """A fresh worker ``worker_name`` and a long one-chunk job whose first ``attempts`` horses are killed;
+    (the worker's process, the job id)."""
+    service.stop_workers()
+    worker = service.start_worker(worker_name)
+    job_id = service.admin.submit(long_scene(spp=4096), chunks=1)["id"]
+    for attempt in range(1, 1 + attempts):
+        _kill_horse_of_attempt(service, job_id, attempt)
+    return worker, job_id
+
+
 def test_a_one_chunk_job_whose_horse_dies_on_every_attempt_fails(live_service: LiveService) -> None:
     """The step that renders and merges a one-chunk job cannot report its own death: the worker fails the
     job when the last retry's horse dies, and stays up."""
     service = live_service
-    service.stop_workers()
-    worker = service.start_worker("k1")
+    worker, job_id = _one_chunk_job_whose_horses_die(service, "k1", 1 + service.settings.chunk_retry_max)
     client = service.client()
-    job_id = client.submit(long_scene(spp=4096), chunks=1)["id"]
-    for attempt in range(1, 2 + service.settings.chunk_retry_max):
-        _kill_horse_of_attempt(service, job_id, attempt)
     final = client.wait(job_id, timeout_s=60)
     assert final["status"] == "failed"
     assert final["error"].startswith(f"render and merge job {job_id}: Work-horse terminated unexpectedly")
@@ -236,12 +243,8 @@ def test_a_one_chunk_job_whose_worker_dies_on_the_last_attempt_fails(live_servic
     """Horses killed on the first attempts, then the whole worker on the last: another worker's maintenance
     pass finds the abandoned step (heartbeat 1 + 3 s) and fails the job instead of leaving it running."""
     service = live_service
-    service.stop_workers()
-    victim = service.start_worker("victim")
+    victim, job_id = _one_chunk_job_whose_horses_die(service, "victim", service.settings.chunk_retry_max)
     client = service.client()
-    job_id = client.submit(long_scene(spp=4096), chunks=1)["id"]
-    for attempt in range(1, 1 + service.settings.chunk_retry_max):
-        _kill_horse_of_attempt(service, job_id, attempt)
     last = 1 + service.settings.chunk_retry_max
     wait_for(lambda: service.steps(job_id).chunks[0].attempts == last, 60, "the last attempt")
     horse_pid = service.steps(job_id).chunks[0].pid
@@ -260,9 +263,8 @@ def test_a_one_chunk_job_whose_worker_dies_on_the_last_attempt_fails(live_servic
 
 def test_two_workers_drain_20_jobs_without_running_any_twice(live_service: LiveService) -> None:
     service = live_service
-    service.stop_workers()
+    job_ids = service.backlog(20, tiny_scene(size_px=8, spp=1), chunks=1)
     client = service.client()
-    job_ids = [client.submit(tiny_scene(size_px=8, spp=1), chunks=1)["id"] for _ in range(20)]
     service.start_worker("d1")
     service.start_worker("d2")
     for job_id in job_ids:

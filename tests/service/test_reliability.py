@@ -234,9 +234,8 @@ def test_reconciliation_requeues_stranded_and_lost_chunks(live_service: LiveServ
 @pytest.mark.slow
 def test_merges_run_ahead_of_the_backlog_so_jobs_finish_in_order(live_service: LiveService) -> None:
     service = live_service
-    service.stop_workers()
+    job_ids = service.backlog(5, tiny_scene(size_px=8, spp=2), chunks=2)
     client = service.client()
-    job_ids = [client.submit(tiny_scene(size_px=8, spp=2), chunks=2)["id"] for _ in range(5)]
     service.start_worker("ordered")
     finals = [client.wait(job_id, timeout_s=120) for job_id in job_ids]
     assert all(f["status"] == "succeeded" for f in finals)

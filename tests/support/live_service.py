@@ -163,6 +163,12 @@ class LiveService:
             time.sleep(0.2)
         pytest.fail(f"job {job_id} not finished after {timeout_s} s: {self.admin.get(job_id)}")
 
+    def backlog(self, count: int, scene: dict[str, Any], **options: Any) -> list[str]:
+        """Stop every worker and submit ``count`` jobs of ``scene`` (as the admin): a queue that the
+        workers a test starts next find full. Their ids, in submission order."""
+        self.stop_workers()
+        return [self.admin.submit(scene, **options)["id"] for _ in range(count)]
+
     def render(self, scene: dict[str, Any], name: str, **options: Any) -> str:
         """Submit (as the admin), make sure a worker runs, and wait for success; returns the job id."""
         self.ensure_worker()
