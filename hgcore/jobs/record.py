@@ -69,10 +69,12 @@ class HashRecord:
 
     _codecs: typing.ClassVar[dict[str, tuple[str, Decode, Encode]]]
     """Python name → (hash name, decode, encode), built once per class."""
+    _decoders: typing.ClassVar[dict[str, tuple[str, Decode]]]
+    """Hash name → (Python name, decode): ``from_hash``'s table (the API reads records on every GET)."""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        cls._codecs = {}
+        cls._codecs, cls._decoders = {}, {}
 
     @classmethod
     def _field_codecs(cls) -> dict[str, tuple[str, Decode, Encode]]:
@@ -80,6 +82,9 @@ class HashRecord:
             hints = typing.get_type_hints(cls)
             for f in dataclasses.fields(cls):  # type: ignore[arg-type]
                 cls._codecs[f.name] = (f.metadata.get("hash", f.name), *_codec(hints[f.name]))
+            cls._decoders |= {
+                hash_name: (name, decode) for name, (hash_name, decode, _) in cls._codecs.items()
+            }
         return cls._codecs
 
     @classmethod
@@ -106,13 +111,12 @@ class HashRecord:
 
     @classmethod
     def from_hash(cls, fields: Mapping[str, str]) -> Self:
-        """The record from its hash fields (a field absent from the hash keeps its default)."""
-        values = {}
-        for name, (hash_name, decode, _) in cls._field_codecs().items():
-            text = fields.get(hash_name)
-            if text is not None:
-                values[name] = decode(text)
-        return cls(**values)
+        """The record from its hash fields (a field absent from the hash keeps its default; one the record
+        does not declare is ignored)."""
+        if not cls._decoders:
+            cls._field_codecs()
+        decoders = cls._decoders
+        return cls(**{decoders[k][0]: decoders[k][1](text) for k, text in fields.items() if k in decoders})
 
 
 @dataclass(frozen=True, slots=True)
