@@ -28,32 +28,23 @@ class MaterialKind(IntEnum):
     BLACK = 7  # emitter surfaces: absorb everything
 
 
-# Parameter offsets inside one record.
+# Parameter offsets inside one record. The statistical and diffractive parameters (roughness, PSD,
+# grating pitch, duty, pits, orders) are not here: they are compiled into the kernel as the constants of
+# the material's optics model (``MaterialRecord.model``).
 KIND = 0
 REFLECTANCE_ID = 1  # diffuse reflectance spectrum
 ETA_ID = 2  # conductor n, dielectric / substrate index
 KAPPA_ID = 3  # conductor extinction κ (a zero spectrum for dielectrics)
 EXTERIOR_IOR = 4
-ROUGHNESS_RMS_M = 5
-CORRELATION_LENGTH_M = 6
-PSD_KIND = 7  # 0 Gaussian, 1 ABC (K-correlation)
-PSD_EXPONENT = 8
-SCATTERING_REGION_RADIUS_M = 9
-FILM_THICKNESS_M = 10
-FILM_IOR_ID = 11
-BEAMS = 12
-PITCH_X_M = 13
-PITCH_Y_M = 14  # 0 for a 1-D grating
-ORIENTATION_RAD = 15
-DUTY = 16
-PIT_DEPTH_M = 17
-PIT_IOR = 18
-LOBE_WIDTH_PER_M = 19
-MAX_ORDER = 20
-DISPERSIVE = 21  # 1 when the dielectric index varies with wavelength
-FILM_TRANSMITS = 22  # 1 for a thin film on a dielectric substrate (reflects and transmits)
-FILM_EXTINCTION = 23  # the film's extinction κ_f (constant over wavelength; 0: a clear film)
-STRIDE = 24
+SCATTERING_REGION_RADIUS_M = 5
+FILM_THICKNESS_M = 6
+FILM_IOR_ID = 7
+BEAMS = 8
+ORIENTATION_RAD = 9
+DISPERSIVE = 10  # 1 when the dielectric index varies with wavelength
+FILM_TRANSMITS = 11  # 1 for a thin film on a dielectric substrate (reflects and transmits)
+FILM_EXTINCTION = 12  # the film's extinction κ_f (constant over wavelength; 0: a clear film)
+STRIDE = 13
 
 # 0: no override; a non-specular vertex is a secondary source sized by the lit patch (docs/physics.md §7).
 DEFAULT_SCATTERING_REGION_RADIUS_M = 0.0

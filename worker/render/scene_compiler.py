@@ -122,8 +122,6 @@ class SceneCompiler:
             values[mat.DISPERSIVE] = float(dispersive)
 
         def rough(m: Any) -> RoughSurface:
-            values[mat.ROUGHNESS_RMS_M] = m.roughness_rms_um * 1e-6
-            values[mat.CORRELATION_LENGTH_M] = m.correlation_length_um * 1e-6
             return RoughSurface(
                 m.roughness_rms_um * 1e-6, m.correlation_length_um * 1e-6, m.psd, m.psd_exponent
             )
