@@ -94,8 +94,8 @@ def run(args: argparse.Namespace) -> int:
     from worker.mitsuba_setup import configure_mitsuba
 
     settings = Settings()  # this process's one: scene limits, Mitsuba variant and thread count
-    configure_mitsuba(args.variant or settings.variant, settings.render_threads)
     scene, bundle_dir = load_scene_file(args.scene)
+    configure_mitsuba(args.variant or settings.variant, settings.render_threads)
     from hgcore.noise_target import NoiseTarget
     from schemas.validation import validate_scene
     from worker.render.api import render_scene
