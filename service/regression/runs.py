@@ -26,7 +26,7 @@ from hgcore.jobs.lifecycle import JobLifecycle
 from hgcore.jobs.queue_graph import EVALUATE_RUN_TASK, merge_rq_id
 from hgcore.regression.models import RunView, SceneResult, Suite, SuiteScene
 from hgcore.regression.store import RegressionStore
-from hgcore.settings import Settings
+from hgcore.settings import SceneLimits, Settings
 from hgcore.store import store_from_settings
 from schemas import EXAMPLES_DIR, Scene, validate_scene
 from schemas.validation import override_film
@@ -41,10 +41,13 @@ def run_seed(run_id: str) -> int:
 
 
 def resolve_scene(
-    entry: SuiteScene, seed: int, job_scene: Callable[[str], dict[str, Any]] | None = None
+    entry: SuiteScene,
+    seed: int,
+    job_scene: Callable[[str], dict[str, Any]] | None = None,
+    limits: SceneLimits | None = None,
 ) -> Scene:
-    """The validated scene of a suite entry with its film overrides and ``seed``; ``job_scene``
-    loads an earlier job's stored scene (service mode only)."""
+    """The scene of a suite entry with its film overrides and ``seed``, validated against ``limits`` (the
+    process's settings); ``job_scene`` loads an earlier job's stored scene (service mode only)."""
     if entry.example is not None:
         path = EXAMPLES_DIR / f"{entry.example}.json"
         if not path.is_file():
@@ -58,7 +61,7 @@ def resolve_scene(
         assert entry.scene is not None
         scene = dict(entry.scene)
     film = {"spp": entry.spp, "width": entry.width, "height": entry.height, "seed": seed}
-    return validate_scene(override_film(scene, **film))
+    return validate_scene(override_film(scene, **film), limits)
 
 
 class RunService:
@@ -77,7 +80,7 @@ class RunService:
         """Resolve every scene once (SceneError / ValueError name the problem), so that a schedule with a
         scene that cannot render is refused when it is created rather than failing at every due time."""
         for entry in suite.scenes:
-            resolve_scene(entry, 0, self.job_scene)
+            resolve_scene(entry, 0, self.job_scene, self.settings)
 
     def start_run(
         self,
@@ -92,7 +95,9 @@ class RunService:
         """Create the run record and one render job per scene; the evaluation follows the renders."""
         run_id = uuid.uuid4().hex
         seed = run_seed(run_id)
-        scenes = [(entry, resolve_scene(entry, seed, self.job_scene)) for entry in suite.scenes]
+        scenes = [
+            (entry, resolve_scene(entry, seed, self.job_scene, self.settings)) for entry in suite.scenes
+        ]
         results = []
         for entry, scene in scenes:
             view, _ = self.jobs.create(
