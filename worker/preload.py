@@ -41,7 +41,8 @@ def _load_libraries(settings: Settings) -> None:
 
     PIL.Image.init()  # registers the image plugins now, not at the first save in each horse (~20 ms)
 
-    import worker.render.api  # noqa: F401
+    import worker.render.api
+    import worker.tasks  # noqa: F401  (RQ imports each task by its dotted name, in every horse)
     from hgcore.artifacts.images import preview_png
 
     preview_png(np.zeros((1, 1, 3)))  # PIL's first PNG encoding (~2 ms); zlib starts no threads
