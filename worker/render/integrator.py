@@ -191,8 +191,8 @@ class PendingRecord:
 
 
 @loop_struct
-class PendingFilm:
-    """The thin film of a pending record (Eq. 18): its value waits for the resolved coherence."""
+class PendingCoating:
+    """The thin-film coating of a pending vertex (Eq. 18): its value waits for the resolved coherence."""
 
     pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
     transmitted: mi.Bool = field(default_factory=lambda: mi.Bool(False))
@@ -457,7 +457,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         wavelengths: mi.Spectrum,
         path: PathState,
         record: PendingRecord,
-        film: PendingFilm,
+        coating: PendingCoating,
         first_vertex: FirstVertex,
     ) -> None:
         """Resolve the pending record in the lanes ``resolve``: its source is what the path reached — the
@@ -498,8 +498,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # without a film lane skip the visibilities of every beam.
             path.beta = dr.if_stmt(
                 (path.beta,),
-                resolve & film.pending,
-                lambda beta: beta * self._film_factor(vertex, em_record, wavelengths, record, film, resolved),
+                resolve & coating.pending,
+                lambda beta: (
+                    beta * self._film_factor(vertex, em_record, wavelengths, record, coating, resolved)
+                ),
                 lambda beta: beta,
                 label="film_factor",
             )
@@ -522,7 +524,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         em_record: mi.UInt32,
         wavelengths: mi.Spectrum,
         record: PendingRecord,
-        film: PendingFilm,
+        coating: PendingCoating,
         resolved: IncidentCoherence,
     ) -> mi.Spectrum:
         """R(V)/R_incoherent of a pending film whose incident light is now ``resolved``: the path was
@@ -532,22 +534,22 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         An emitter reached straight from the film has its interference phase taken towards the emitter's
         centre (BRIEF), as in next-event estimation (the terms there: a symbolic branch, rarely taken);
         through mirrors, along the path."""
-        phase_terms = list(film.terms)
+        phase_terms = list(coating.terms)
         if not self.plane_waves:
-            centre_phase = vertex.hit_emitter & ~record.chain_specular & ~film.transmitted
+            centre_phase = vertex.hit_emitter & ~record.chain_specular & ~coating.transmitted
 
             def centre_terms(*_: mi.Spectrum) -> list[mi.Spectrum]:
                 table = self.context.emitter_flat
-                _, emitter_to_film = emitter_direction(mi, table, em_record, film.position)
-                cos_centre = -dr.dot(emitter_to_film, film.normal)
-                return list(self.kernels.film_terms(film.material, cos_centre, wavelengths))
+                _, emitter_to_film = emitter_direction(mi, table, em_record, coating.position)
+                cos_centre = -dr.dot(emitter_to_film, coating.normal)
+                return list(self.kernels.film_terms(coating.material, cos_centre, wavelengths))
 
             def kept(*terms: mi.Spectrum) -> list[mi.Spectrum]:
                 return list(terms)
 
             phase_terms = dr.if_stmt(tuple(phase_terms), centre_phase, centre_terms, kept, label="centre")
         visibility = self.kernels.visibility
-        film_factor = film_reflectance(phase_terms, visibility, resolved, film.separation, wavelengths)
+        film_factor = film_reflectance(phase_terms, visibility, resolved, coating.separation, wavelengths)
         return film_factor / dr.maximum(phase_terms[0], 1e-12)
 
     @dr.syntax
@@ -559,7 +561,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         continue_path: mi.Bool,
         film_passthrough: mi.Bool,
         record: PendingRecord,
-        film: PendingFilm,
+        coating: PendingCoating,
         first_vertex: FirstVertex,
     ) -> None:
         """Start a pending record at a non-specular vertex (its incident frame ⟂ the sampled direction; a
@@ -585,7 +587,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         if has_film:
             # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
             is_film = new_record & self.kernels.is_kind(vertex.kind, mat.INTERFERENCE_KINDS)
-            film.pending = dr.select(new_record, is_film, film.pending)
+            coating.pending = dr.select(new_record, is_film, coating.pending)
             thickness = self.kernels.param(vertex.material, mat.FILM_THICKNESS_M)
             # The shear between successive beams (docs/physics_interactions.md §3) for light arriving along
             # −wo: from the substrate (wo.z < 0; a transmitting film's frame is not flipped) the incident
@@ -597,12 +599,12 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             )
             film_ior = vertex.spectra[mat.FILM_IOR_ID][0]
             shear = film_shear(vertex.frame.n, -wo_world, thickness, film_ior, incident_ior, OPS)
-            film.separation = dr.select(is_film, mi.Vector3f(*shear), film.separation)
-            film.material = dr.select(is_film, vertex.material, film.material)
-            film.position = dr.select(is_film, vertex.si.p, film.position)
-            film.normal = dr.select(is_film, vertex.frame.n, film.normal)
-            film.transmitted = dr.select(is_film, sampled.film.transmitted, film.transmitted)
-            film.terms = dr.select(is_film, list(sampled.film.terms), list(film.terms))
+            coating.separation = dr.select(is_film, mi.Vector3f(*shear), coating.separation)
+            coating.material = dr.select(is_film, vertex.material, coating.material)
+            coating.position = dr.select(is_film, vertex.si.p, coating.position)
+            coating.normal = dr.select(is_film, vertex.frame.n, coating.normal)
+            coating.transmitted = dr.select(is_film, sampled.film.transmitted, coating.transmitted)
+            coating.terms = dr.select(is_film, list(sampled.film.terms), list(coating.terms))
         # Through a perfect mirror / refraction the carried vectors follow the beam.
         through_specular = continue_path & (vertex.specular | film_passthrough) & record.pending
         record.chain_specular = dr.select(new_record, False, record.chain_specular | through_specular)
@@ -612,8 +614,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         record.frame_y = dr.select(
             through_specular, _reflect_vector(record.frame_y, vertex.frame.n), record.frame_y
         )
-        film.separation = dr.select(
-            through_specular, _reflect_vector(film.separation, vertex.frame.n), film.separation
+        coating.separation = dr.select(
+            through_specular, _reflect_vector(coating.separation, vertex.frame.n), coating.separation
         )
         first_vertex.seen |= vertex.nonspecular
 
@@ -719,7 +721,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         # film, the first non-specular vertex, the diagnostics sums and the first-hit AOVs.
         path = PathState()
         record = PendingRecord()
-        film = PendingFilm(terms=[mi.Spectrum(0.0) for _ in range(kernels.max_beams if has_film else 0)])
+        coating = PendingCoating(
+            terms=[mi.Spectrum(0.0) for _ in range(kernels.max_beams if has_film else 0)]
+        )
         first_vertex = FirstVertex()
         sums = DiagnosticSums()
         aov = FirstHit(material=mi.UInt32(self.context.black_material))
@@ -788,10 +792,19 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
                 self._resolve(
-                    resolve, vertex, em_record, segment, ray.o, wavelengths, path, record, film, first_vertex
+                    resolve,
+                    vertex,
+                    em_record,
+                    segment,
+                    ray.o,
+                    wavelengths,
+                    path,
+                    record,
+                    coating,
+                    first_vertex,
                 )
             record.pending &= ~resolve
-            film.pending &= ~resolve
+            coating.pending &= ~resolve
 
             # ---------------------- Emission reached by material sampling (MIS with NEE) ---------
             ds = mi.DirectionSample3f(scene, si=si, ref=path.prev_si)
@@ -868,7 +881,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             self._advance_throughput(path, bs, continue_path)
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             self._start_or_carry(
-                vertex, bs, wo_world, continue_path, film_passthrough, record, film, first_vertex
+                vertex, bs, wo_world, continue_path, film_passthrough, record, coating, first_vertex
             )
 
             path.prev_si = mi.Interaction3f(si)
