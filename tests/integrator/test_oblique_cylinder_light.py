@@ -46,7 +46,7 @@ from schemas import build, validate_scene
 from tests.integrator.scenes import coated_plane
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.api import render_scene
-from worker.render.emitters import CylinderModes, EmitterKind, EmitterRecord, EmitterTable
+from worker.render.emitters import CylinderModes, EmitterGeometry, EmitterKind, EmitterTable
 
 MODES = 16
 FLOAT32_ERROR = 1e-6
@@ -67,7 +67,7 @@ def kernel_coefficients(radius_m: float, length_m: float, angles_deg: list[float
     lane per angle, in a transverse frame turned about the view (the kernel may not assume û = x)."""
     mi = configured_mitsuba()
     axis = _unit((0.3, -0.5, 0.8))
-    record = EmitterRecord(
+    record = EmitterGeometry(
         EmitterKind.CYLINDER, (0.1, 0.2, 0.3), axis=tuple(axis), radius_m=radius_m, length_m=length_m
     )
     across = _unit(np.cross(axis, (1.0, 0.0, 0.0)))
@@ -216,10 +216,10 @@ def test_rectangles_beside_a_cylinder_keep_the_rectangle_modes() -> None:
     """In a scene with both, the per-lane coefficients of a rectangle's lanes are the universal ones."""
     mi = configured_mitsuba()
     records = [
-        EmitterRecord(
+        EmitterGeometry(
             EmitterKind.CYLINDER, (0.0, 0.0, 0.0), axis=(0.0, 0.6, 0.8), radius_m=0.01, length_m=0.02
         ),
-        EmitterRecord(EmitterKind.RECTANGLE, (0.0, 0.0, 1.0), width_m=0.3, height_m=0.1),
+        EmitterGeometry(EmitterKind.RECTANGLE, (0.0, 0.0, 1.0), width_m=0.3, height_m=0.1),
     ]
     modes = CylinderModes.for_scene(mi, {EmitterKind.CYLINDER, EmitterKind.RECTANGLE}, MODES)
     lanes = mi.UInt32([0, 1])

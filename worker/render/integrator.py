@@ -100,7 +100,7 @@ class RenderContext:
     spectra_flat: mi.Float
     shape_material: mi.UInt32  # shape registry id -> material index
     emitter_flat: mi.Float
-    emitter_index: mi.UInt32  # emitter registry id -> emitter record
+    emitter_index: mi.UInt32  # emitter registry id -> emitter row
     emitter_kinds: set
     # (n, m) -> ĉ of the universal expansions (Eq. 14) used for visibilities: uniform disks (spheres, disks,
     # scattering regions) and uniform rectangles (rectangles; cylinders: ``cylinder_modes`` where it is set).
@@ -177,7 +177,7 @@ class PathState:
 
 
 @loop_struct
-class PendingRecord:
+class PendingVertex:
     """A non-specular vertex waiting for the coherence of the light it receives (module docstring)."""
 
     pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
@@ -338,10 +338,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         self.kernels = MaterialKernels(params)
 
     # ------------------------------------------------------------------ coherence helpers
-    def _rect_modes(self, em_record: mi.UInt32, frame_x: mi.Vector3f, frame_y: mi.Vector3f):
+    def _rect_modes(self, emitter_row: mi.UInt32, frame_x: mi.Vector3f, frame_y: mi.Vector3f):
         """Per-lane ĉ of rectangle-like emitters seen in this frame (``emitters.emitter_rect_modes``)."""
         table, modes = self.context.emitter_flat, self.context.cylinder_modes
-        return emitter_rect_modes(mi, table, modes, em_record, frame_x, frame_y)
+        return emitter_rect_modes(mi, table, modes, emitter_row, frame_x, frame_y)
 
     def _frame_for(self, direction: mi.Vector3f) -> tuple[mi.Vector3f, mi.Vector3f]:
         x_axis, y_axis = transverse_frame_components(
@@ -389,16 +389,16 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         return EmitterKind.SPHERE in self.context.emitter_kinds
 
     def _emitter_pdf(
-        self, scene: mi.Scene, mitsuba_pdf: mi.Float, em_record: mi.UInt32, distance_m: mi.Float | None
+        self, scene: mi.Scene, mitsuba_pdf: mi.Float, emitter_row: mi.UInt32, distance_m: mi.Float | None
     ) -> mi.Float:
-        """The solid-angle density of emitter sampling towards emitter ``em_record`` from a receiver
+        """The solid-angle density of emitter sampling towards emitter ``emitter_row`` from a receiver
         ``distance_m`` from its centre: Mitsuba's, except for spheres seen from outside, whose uniform cone
         has the density selection/Ω with Ω from ``emitters.sphere_solid_angle`` (Mitsuba's float32 cone
         pdf is 3 % high for a 1 mm sphere at 0.6 m and infinite below a/d ≈ 2.4e-4)."""
         if not self._has_sphere_emitters():
             return mitsuba_pdf  # (the select below would take Mitsuba's in every lane)
-        sphere, solid_angle = sphere_solid_angle(mi, self.context.emitter_flat, em_record, distance_m)
-        selection = scene.pdf_emitter(em_record, sphere)
+        sphere, solid_angle = sphere_solid_angle(mi, self.context.emitter_flat, emitter_row, distance_m)
+        selection = scene.pdf_emitter(emitter_row, sphere)
         return dr.select(sphere, selection / dr.maximum(solid_angle, 1e-30), mitsuba_pdf)
 
     def _screen_angle_terms(
@@ -451,12 +451,12 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         self,
         resolve: mi.Bool,
         vertex: Vertex,
-        em_record: mi.UInt32,
+        emitter_row: mi.UInt32,
         segment: mi.Float,
         ray_origin: mi.Point3f,
         wavelengths: mi.Spectrum,
         path: PathState,
-        record: PendingRecord,
+        record: PendingVertex,
         coating: PendingCoating,
         first_vertex: FirstVertex,
     ) -> None:
@@ -469,7 +469,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             mi,
             self.context.emitter_flat,
             self.context.emitter_kinds,
-            em_record,
+            emitter_row,
             record.frame_x,
             record.frame_y,
         )
@@ -481,7 +481,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             source_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
         # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
         # becomes the distance from the segment's origin to that centre.
-        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray_origin)
+        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, emitter_row, ray_origin)
         record.chain_distance = dr.select(
             vertex.hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
         )
@@ -490,8 +490,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             record.chain_distance,
             record.frame_x,
             record.frame_y,
-            vertex.hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
-            self._rect_modes(em_record, record.frame_x, record.frame_y),
+            vertex.hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, emitter_row),
+            self._rect_modes(emitter_row, record.frame_x, record.frame_y),
         )
         if self.kernels.has(mat.INTERFERENCE_KINDS):
             # A symbolic branch: most resolved records are not a film's (the diffuse floor's), and packets
@@ -500,7 +500,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 (path.beta,),
                 resolve & coating.pending,
                 lambda beta: (
-                    beta * self._film_factor(vertex, em_record, wavelengths, record, coating, resolved)
+                    beta * self._film_factor(vertex, emitter_row, wavelengths, record, coating, resolved)
                 ),
                 lambda beta: beta,
                 label="film_factor",
@@ -521,9 +521,9 @@ class HGPathIntegrator(mi.SamplingIntegrator):
     def _film_factor(
         self,
         vertex: Vertex,
-        em_record: mi.UInt32,
+        emitter_row: mi.UInt32,
         wavelengths: mi.Spectrum,
-        record: PendingRecord,
+        record: PendingVertex,
         coating: PendingCoating,
         resolved: IncidentCoherence,
     ) -> mi.Spectrum:
@@ -540,7 +540,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             def centre_terms(*_: mi.Spectrum) -> list[mi.Spectrum]:
                 table = self.context.emitter_flat
-                _, emitter_to_film = emitter_direction(mi, table, em_record, coating.position)
+                _, emitter_to_film = emitter_direction(mi, table, emitter_row, coating.position)
                 cos_centre = -dr.dot(emitter_to_film, coating.normal)
                 return list(self.kernels.film_terms(coating.material, cos_centre, wavelengths))
 
@@ -560,7 +560,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         wo_world: mi.Vector3f,
         continue_path: mi.Bool,
         film_passthrough: mi.Bool,
-        record: PendingRecord,
+        record: PendingVertex,
         coating: PendingCoating,
         first_vertex: FirstVertex,
     ) -> None:
@@ -639,11 +639,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
     def _emitter_light(
         self,
         needed: mi.Bool,
-        em_record: mi.UInt32,
+        emitter_row: mi.UInt32,
         receiver: mi.Point3f,
         geometry: tuple[mi.Float, mi.Vector3f] | None,
     ) -> tuple[IncidentCoherence, CoherenceSample]:
-        """The coherence of the light of emitter ``em_record`` at ``receiver``, a distance r from its centre
+        """The coherence of the light of emitter ``emitter_row`` at ``receiver``, a distance r from its centre
         along the direction d (centre → receiver): Σ⊥ of its whole silhouette in a frame ⟂ d, computed
         only in the lanes ``needed`` (zero elsewhere), and the diagnostics' record of it.
 
@@ -660,14 +660,16 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             distance_m, direction = geometry
         if needed:
             if lazy:
-                distance_m, direction = emitter_direction(mi, self.context.emitter_flat, em_record, receiver)
+                distance_m, direction = emitter_direction(
+                    mi, self.context.emitter_flat, emitter_row, receiver
+                )
             frame_x, frame_y = self._frame_for(direction)
             sigma = emitter_coherence(
-                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, frame_x, frame_y
+                mi, self.context.emitter_flat, self.context.emitter_kinds, emitter_row, frame_x, frame_y
             )
             angle_terms = self._screen_angle_terms(*sigma, frame_x, frame_y)
-        is_rect = emitter_is_rect(mi, self.context.emitter_flat, em_record)
-        rect_modes = self._rect_modes(em_record, frame_x, frame_y)
+        is_rect = emitter_is_rect(mi, self.context.emitter_flat, emitter_row)
+        rect_modes = self._rect_modes(emitter_row, frame_x, frame_y)
         coherence = IncidentCoherence(*sigma, distance_m, frame_x, frame_y, is_rect, rect_modes)
         return coherence, self._coherence_sample(sigma, distance_m, angle_terms)
 
@@ -720,7 +722,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         # Loop state (Dr.Jit traverses each struct): the estimator, the pending coherence record and its
         # film, the first non-specular vertex, the diagnostics sums and the first-hit AOVs.
         path = PathState()
-        record = PendingRecord()
+        record = PendingVertex()
         coating = PendingCoating(
             terms=[mi.Spectrum(0.0) for _ in range(kernels.max_beams if has_film else 0)]
         )
@@ -788,13 +790,13 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             # ---------------------- Resolve the pending record: its source is what we reached ----
             resolve = record.pending & (hit_emitter | (nonspecular & ~film_passthrough))
-            em_record = self._emitter_lookup(emitter_ptr)
+            emitter_row = self._emitter_lookup(emitter_ptr)
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
                 self._resolve(
                     resolve,
                     vertex,
-                    em_record,
+                    emitter_row,
                     segment,
                     ray.o,
                     wavelengths,
@@ -809,8 +811,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # ---------------------- Emission reached by material sampling (MIS with NEE) ---------
             ds = mi.DirectionSample3f(scene, si=si, ref=path.prev_si)
             em_pdf = scene.pdf_emitter_direction(path.prev_si, ds, ~path.prev_delta)
-            hit_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, path.prev_si.p)
-            em_pdf = self._emitter_pdf(scene, em_pdf, em_record, hit_distance)
+            hit_distance, _ = emitter_direction(mi, self.context.emitter_flat, emitter_row, path.prev_si.p)
+            em_pdf = self._emitter_pdf(scene, em_pdf, emitter_row, hit_distance)
             mis = dr.select(path.prev_delta, 1.0, mis_weight(path.prev_pdf, em_pdf))
             mis = dr.select(path.prev_skip_emission, 0.0, mis)
             emitted = dr.select(hit_emitter, path.beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)

@@ -30,7 +30,7 @@ class MaterialKind(IntEnum):
 
 # Parameter offsets inside one record. The statistical and diffractive parameters (roughness, PSD,
 # grating pitch, duty, pits, orders) are not here: they are compiled into the kernel as the constants of
-# the material's optics model (``MaterialRecord.model``).
+# the material's optics model (``MaterialRow.model``).
 KIND = 0
 REFLECTANCE_ID = 1  # diffuse reflectance spectrum
 ETA_ID = 2  # conductor n, dielectric / substrate index
@@ -66,7 +66,7 @@ INTERFERENCE_KINDS = frozenset({MaterialKind.THIN_FILM})
 
 
 @dataclass
-class MaterialRecord:
+class MaterialRow:
     """One material: its kind, table values (offset -> value) and, for the statistical and diffractive
     kinds, the optics model object whose constants are compiled into the kernel
     (``hgcore.optics.rough_surface.RoughSurface`` or ``hgcore.optics.grating.BinaryGrating``)."""
@@ -87,14 +87,14 @@ class MaterialRecord:
 
 @dataclass
 class MaterialTable:
-    records: list[MaterialRecord] = field(default_factory=list)
+    records: list[MaterialRow] = field(default_factory=list)
 
-    def add(self, record: MaterialRecord) -> int:
+    def add(self, record: MaterialRow) -> int:
         self.records.append(record)
         return len(self.records) - 1
 
     def flat(self) -> np.ndarray:
-        rows = [record.as_row() for record in self.records] or [MaterialRecord(MaterialKind.BLACK).as_row()]
+        rows = [record.as_row() for record in self.records] or [MaterialRow(MaterialKind.BLACK).as_row()]
         return np.concatenate(rows)
 
     @property

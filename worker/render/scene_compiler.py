@@ -27,7 +27,7 @@ from schemas import scene as model
 from schemas.photometry import evaluate_spectrum
 from schemas.procedural import GENERATORS, generate_mesh
 from worker.render import materials as mat
-from worker.render.emitters import EmitterKind, EmitterRecord, EmitterTable
+from worker.render.emitters import EmitterGeometry, EmitterKind, EmitterTable
 from worker.render.spectral import SpectralTable, grid_wavelengths_nm
 
 EMITTER_SPECTRUM_STEP_NM = 1.0
@@ -102,9 +102,7 @@ class SceneCompiler:
         self.grid_nm = grid_wavelengths_nm()
 
     # ------------------------------------------------------------------ materials
-    def _material_record(
-        self, material: Any, spectra_table: SpectralTable
-    ) -> tuple[mat.MaterialRecord, dict]:
+    def _material_record(self, material: Any, spectra_table: SpectralTable) -> tuple[mat.MaterialRow, dict]:
         grid = self.grid_nm
         values: dict[int, float] = {}
         if getattr(material, "scattering_region_radius_m", None) is not None:
@@ -131,7 +129,7 @@ class SceneCompiler:
             values[mat.REFLECTANCE_ID] = spectra_table.add(
                 np.clip(spectrum_on(material.reflectance, grid), 0, 1)
             )
-            return mat.MaterialRecord(mat.MaterialKind.DIFFUSE, values), {
+            return mat.MaterialRow(mat.MaterialKind.DIFFUSE, values), {
                 "type": "diffuse",
                 "reflectance": self._mitsuba_spectrum(material.reflectance, clip=True),
             }
@@ -143,7 +141,7 @@ class SceneCompiler:
             else:
                 conductor(material.conductor)
                 reference = {"type": "conductor", "material": material.conductor}
-            return mat.MaterialRecord(mat.MaterialKind.MIRROR, values), reference
+            return mat.MaterialRow(mat.MaterialKind.MIRROR, values), reference
         if kind == "dielectric":
             dielectric(material.ior)
             values[mat.EXTERIOR_IOR] = material.exterior_ior
@@ -152,7 +150,7 @@ class SceneCompiler:
                 if isinstance(material.ior, float)
                 else float(ior_data.spectral_ior(material.ior, 550.0)[0])
             )
-            return mat.MaterialRecord(mat.MaterialKind.DIELECTRIC, values), {
+            return mat.MaterialRow(mat.MaterialKind.DIELECTRIC, values), {
                 "type": "dielectric",
                 "int_ior": ior_value,
                 "ext_ior": material.exterior_ior,
@@ -160,11 +158,11 @@ class SceneCompiler:
         placeholder = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.5, 0.5]}}
         if kind == "rough_conductor":
             conductor(material.conductor)
-            return mat.MaterialRecord(mat.MaterialKind.ROUGH_CONDUCTOR, values, rough(material)), placeholder
+            return mat.MaterialRow(mat.MaterialKind.ROUGH_CONDUCTOR, values, rough(material)), placeholder
         if kind == "rough_dielectric":
             dielectric(material.ior)
             values[mat.EXTERIOR_IOR] = material.exterior_ior
-            return mat.MaterialRecord(mat.MaterialKind.ROUGH_DIELECTRIC, values, rough(material)), placeholder
+            return mat.MaterialRow(mat.MaterialKind.ROUGH_DIELECTRIC, values, rough(material)), placeholder
         if kind == "thin_film":
             values[mat.FILM_THICKNESS_M] = material.film_thickness_um * 1e-6
             values[mat.FILM_IOR_ID] = spectra_table.add(_ior_on_grid(material.film_ior, grid)[0])
@@ -176,7 +174,7 @@ class SceneCompiler:
             else:
                 dielectric(material.substrate.ior)
                 values[mat.FILM_TRANSMITS] = 1.0
-            return mat.MaterialRecord(mat.MaterialKind.THIN_FILM, values, rough(material)), placeholder
+            return mat.MaterialRow(mat.MaterialKind.THIN_FILM, values, rough(material)), placeholder
         if kind == "grating":
             conductor(material.conductor)
             values[mat.ORIENTATION_RAD] = math.radians(material.orientation_deg)
@@ -189,7 +187,7 @@ class SceneCompiler:
                 lobe_width_per_um=material.lobe_width_per_um,
                 max_order=max(material.max_order, 1),
             )
-            return mat.MaterialRecord(mat.MaterialKind.GRATING, values, grating), placeholder
+            return mat.MaterialRow(mat.MaterialKind.GRATING, values, grating), placeholder
         raise InputError(f"materials: type {kind!r} is not supported by the renderer")
 
     def _mitsuba_spectrum(self, spectrum: Any, clip: bool = False) -> dict[str, Any]:
@@ -282,17 +280,17 @@ class SceneCompiler:
         params.update()
         return mesh
 
-    def _emitter(self, emitter: Any, film: model.Film) -> tuple[dict[str, Any], EmitterRecord, float]:
+    def _emitter(self, emitter: Any, film: model.Film) -> tuple[dict[str, Any], EmitterGeometry, float]:
         """Mitsuba shape dict (without the emitter), the coherence record and the emitting area (m²)."""
         kind = emitter.type
         if kind == "sphere":
-            record = EmitterRecord(EmitterKind.SPHERE, tuple(emitter.center_m), radius_m=emitter.radius_m)
+            record = EmitterGeometry(EmitterKind.SPHERE, tuple(emitter.center_m), radius_m=emitter.radius_m)
             shape = {"type": "sphere", "center": list(emitter.center_m), "radius": emitter.radius_m}
             return shape, record, 4 * math.pi * emitter.radius_m**2
         if kind == "cylinder":
             p0, p1 = np.asarray(emitter.p0_m), np.asarray(emitter.p1_m)
             length = float(np.linalg.norm(p1 - p0))
-            record = EmitterRecord(
+            record = EmitterGeometry(
                 EmitterKind.CYLINDER,
                 tuple(((p0 + p1) / 2).tolist()),
                 axis=tuple(((p1 - p0) / length).tolist()),
@@ -305,7 +303,7 @@ class SceneCompiler:
             normal = _normalized(emitter.normal)
             up = np.asarray(emitter.up, dtype=float) - np.dot(emitter.up, normal) * normal
             up /= np.linalg.norm(up)
-            record = EmitterRecord(
+            record = EmitterGeometry(
                 EmitterKind.RECTANGLE,
                 tuple(emitter.center_m),
                 axis=tuple(normal.tolist()),
@@ -320,7 +318,7 @@ class SceneCompiler:
             return shape, record, emitter.width_m * emitter.height_m
         if kind == "disk":
             normal = _normalized(emitter.normal)
-            record = EmitterRecord(
+            record = EmitterGeometry(
                 EmitterKind.DISK,
                 tuple(emitter.center_m),
                 axis=tuple(normal.tolist()),
@@ -384,7 +382,7 @@ class SceneCompiler:
             record, reference = self._material_record(material, spectral_table)
             material_index[name] = material_table.add(record)
             references[name] = reference
-        black_index = material_table.add(mat.MaterialRecord(mat.MaterialKind.BLACK))
+        black_index = material_table.add(mat.MaterialRow(mat.MaterialKind.BLACK))
 
         hg_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
         reference_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
