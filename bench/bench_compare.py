@@ -36,7 +36,10 @@ def _probe(scene_name: str) -> float:
 
     if hasattr(mitsuba_setup, "configure_mitsuba"):  # older trees chose the variant when imported
         mitsuba_setup.configure_mitsuba("llvm_ad_spectral")
-    from worker.render.api import renderer_for
+    try:
+        from worker.render.chunks import renderer_for
+    except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
+        from worker.render.api import renderer_for  # type: ignore[no-redef]
 
     data = json.loads((ROOT / "schemas" / "examples" / scene_name).read_text())
     data["film"] = {**data["film"], "width": SIZE_PX, "height": SIZE_PX, "spp": SPP, "bands": BANDS}

@@ -82,7 +82,7 @@ def bench_scene(name: str, resolution_px: int, integrator: str) -> dict[str, Any
 def render_sums(scene: dict[str, Any], spp: int, seed: int) -> tuple[PixelSums, float]:
     """One chunk of ``spp`` samples per pixel with ``seed``: its sums and wall-clock seconds."""
     from schemas.validation import validate_scene
-    from worker.render.api import renderer_for
+    from worker.render.chunks import renderer_for
 
     start = time.perf_counter()
     sums = renderer_for(validate_scene(scene)).render_sums(spp, seed)  # scene load included, as a chunk's
@@ -91,7 +91,7 @@ def render_sums(scene: dict[str, Any], spp: int, seed: int) -> tuple[PixelSums, 
 
 def chunk_seed(base: int, index: int) -> int:
     """The seed of chunk ``index`` of a sequence: ``plan_chunks``'s spacing, so that no two coincide."""
-    from worker.render.api import plan_chunks
+    from worker.render.chunks import plan_chunks
 
     return plan_chunks(index + 1, index + 1, base)[index].seed
 

@@ -14,7 +14,7 @@ Measured (issue 3, "Performance"; targets: 1 mode ≤ 1.5× ``path``, 16 modes �
   interleave the integrators and each keeps its best of ``repeats`` (the machine is shared).
 * samples/s = width·height·spp / seconds; ratios hg(1 mode)/path and hg(16 modes)/hg(1 mode).
 * peak memory: a 1024×1024, 32-band render of the same scene at ``MEMORY_SPP`` spp through the public API
-  (``worker.render.api.render_scene``, EXR writing included) in a fresh subprocess, whose
+  (``worker.render.chunks.render_scene``, EXR writing included) in a fresh subprocess, whose
   ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` is the peak resident set (KiB on Linux); skipped by
   ``--quick``.
 
@@ -193,7 +193,7 @@ def _memory_probe() -> dict[str, Any]:
     from worker.mitsuba_setup import configure_mitsuba
 
     configure_mitsuba(VARIANT)
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     scene = validate_scene(example_scene(CORNELL_SCENE, MEMORY_RESOLUTION_PX, MEMORY_SPP, MEMORY_BANDS, 1))
     baseline_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

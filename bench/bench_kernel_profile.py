@@ -79,7 +79,7 @@ def _probe(scene_name: str, with_mitsuba: bool) -> dict[str, list[dict[str, floa
     mi = configure_mitsuba("llvm_ad_spectral")
     import drjit as dr
 
-    from worker.render.api import renderer_for
+    from worker.render.chunks import renderer_for
 
     data = json.loads((ROOT / "schemas" / "examples" / f"{scene_name}.json").read_text())
     data["film"] = {**data["film"], "width": SIZE_PX, "height": SIZE_PX, "spp": SPP, "bands": BANDS}

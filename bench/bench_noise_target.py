@@ -54,7 +54,7 @@ def scene_of(name: str, spp: int, seed: int) -> Scene:
 def one(name: str, seed: int, rel_error: float, quantile: float | None) -> dict[str, Any]:
     """A target render and its oracle fixed render."""
     from hgcore.noise_target import NoiseTarget
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     target = NoiseTarget(rel_error=rel_error, quantile=quantile, time_budget_s=TIME_BUDGET_S)
     with tempfile.TemporaryDirectory() as tmp:
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1])
     args = parser.parse_args(argv)
     configure_mitsuba("llvm_ad_spectral")
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     machine = MachineLoad()
     with tempfile.TemporaryDirectory() as tmp:

@@ -3,7 +3,7 @@
 Measured:
 
 * cost per sample: the Cornell box example at N×N px, ``SPP`` spp, ``BANDS`` bands, max depth 8, in
-  ``llvm_ad_spectral``, rendered through the public API (``worker.render.api.render_scene``: tiles,
+  ``llvm_ad_spectral``, rendered through the public API (``worker.render.chunks.render_scene``: tiles,
   accumulation, images and EXR writing included) in a fresh subprocess per measurement. JIT compilation
   is reported apart: the subprocess first renders the scene at 32² (which compiles the kernels; the
   timed render hits Dr.Jit's kernel cache, its IR does not depend on the image size) and reports that
@@ -62,7 +62,10 @@ def probe(resolution_px: int, spp: int, bands: int, target_rel_error: float = 0.
 
     if hasattr(mitsuba_setup, "configure_mitsuba"):  # older trees chose the variant when imported
         mitsuba_setup.configure_mitsuba("llvm_ad_spectral")
-    from worker.render.api import render_scene
+    try:
+        from worker.render.chunks import render_scene
+    except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
+        from worker.render.api import render_scene  # type: ignore[no-redef]
 
     target = NoiseTarget(rel_error=target_rel_error) if target_rel_error > 0 else None
 

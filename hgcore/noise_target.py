@@ -14,7 +14,7 @@ Both fall as 1/√N, so after a round of N samples with error e the total that j
 as N·(e/E)²; the next round renders the difference (at least N/16 so that rounds stay worth their
 overhead, at most 8N so that a lucky low early estimate cannot run away), capped by the time left at the
 rate measured so far. Each round is a chunk with the next chunk index's seed (the renderer's
-``worker.render.api.chunk_seed``), so
+``worker.render.chunks.chunk_seed``), so
 the result is the same as a fixed render of those chunks: bitwise deterministic given the target (a time
 budget makes the number of rounds depend on the machine's speed, by nature).
 """

@@ -49,7 +49,7 @@ def gallery_scene(entry: GalleryEntry, size_px: int | None, spp: int | None) -> 
 
 def render_entry(entry: GalleryEntry, size_px: int | None, spp: int | None, out_dir: Path) -> dict[str, Any]:
     """Render one entry into ``out_dir``; its summary.json gains ``wall_s`` and ``gallery`` fields."""
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     scene = gallery_scene(entry, size_px, spp)
     out_dir.mkdir(parents=True, exist_ok=True)

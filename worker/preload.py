@@ -41,7 +41,7 @@ def _load_libraries(settings: Settings) -> None:
 
     PIL.Image.init()  # registers the image plugins now, not at the first save in each horse (~20 ms)
 
-    import worker.render.api
+    import worker.render.chunks
     import worker.tasks  # noqa: F401  (RQ imports each task by its dotted name, in every horse)
     from hgcore.artifacts.images import preview_png
 

@@ -4,7 +4,7 @@ for a job of one chunk; and evaluate a regression run once its renders ended.
 They run in RQ's forked work horse (``worker.queue_worker``) with the settings their worker bound
 (``worker.horse``), so the renderer (Mitsuba, Dr.Jit) is imported here and never in the API process. Every
 change to a job goes through its ``JobLifecycle``: a chunk renders spp partition ``i`` of
-``worker.render.api.plan_chunks(spp, K, seed)`` and uploads ``jobs/<id>/chunks/<i>.npz`` to the artifact
+``worker.render.chunks.plan_chunks(spp, K, seed)`` and uploads ``jobs/<id>/chunks/<i>.npz`` to the artifact
 store (a retried chunk uploads to the same key, so a retry never leaves a duplicate); the merge step runs
 after every chunk ended (success or failure) and ``finalize`` stores ``image.exr``, ``preview.png``,
 ``summary.json`` (and whatever else ``merge_chunks`` produces), ``worker.log`` and ``manifest.json``.
@@ -109,7 +109,7 @@ def _start_chunk(
 ) -> tuple[Any, Scene, Path | None, CancelPoll]:
     """Mark chunk ``chunk_index`` running; its spec, the scene, the bundle folder (inputs copied to
     ``work_dir``) and the cancel poll."""
-    from worker.render.api import plan_chunks
+    from worker.render.chunks import plan_chunks
 
     chunk = plan_chunks(record.spp, record.chunk_count, record.seed)[chunk_index]
     horse.lifecycle.start_chunk(record.id, chunk_index, horse.worker_name, os.getpid(), chunk.spp)
@@ -129,7 +129,7 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
     record = horse.lifecycle.record(job_id)
     if record is None or record.is_final:
         return _skipped(record)
-    from worker.render.api import render_chunk
+    from worker.render.chunks import render_chunk
     from worker.render.renderer import RenderCanceledError
 
     with horse_work_dir(f"{job_id}-{chunk_index}") as tmp:
@@ -163,7 +163,7 @@ def render_job_task(job_id: str) -> dict[str, Any]:
         record = horse.lifecycle.record(job_id)
         if record is None or record.is_final:
             return _skipped(record)
-        from worker.render.api import render_to_dir
+        from worker.render.chunks import render_to_dir
         from worker.render.renderer import RenderCanceledError
 
         with horse_work_dir(job_id) as tmp:
@@ -216,7 +216,7 @@ def merge_task(job_id: str) -> dict[str, Any]:
             horse.lifecycle.fail(job_id, "; ".join(failures))
             return {"failed": failures}
         with _step("merge"), horse_work_dir(f"{job_id}-merge") as tmp:
-            from worker.render.api import merge_chunks
+            from worker.render.chunks import merge_chunks
 
             merge_started_s = _start_merge(horse, job_id)
             work_dir = Path(tmp)

@@ -1,8 +1,8 @@
 """The RQ job graph of a render job, and the one place that names its tasks, RQ ids and queues.
 
 A job of ``K > 1`` chunks becomes ``K`` RQ chunk jobs (``<id>-chunk-<i>``; the worker renders spp
-partition ``i`` of ``worker.render.api.plan_chunks(spp, K, seed)``, each with its own seed) on the queue its
-priority names, plus one merge job (``<id>-merge``) that depends on all chunks (failures allowed, so the
+partition ``i`` of ``worker.render.chunks.plan_chunks(spp, K, seed)``, each with its own seed) on the queue
+its priority names, plus one merge job (``<id>-merge``) that depends on all chunks (failures allowed, so the
 merge step is also where a failed chunk fails the job). A job of one chunk becomes a single RQ job under the
 merge job's id that renders and merges in one work horse: no partial upload, and one dequeue and fork
 instead of two (half the queue's latency for small jobs). Either way ``<id>-merge`` is the job's final step,

@@ -4,7 +4,7 @@ regression scheduler as its own process).
 ``regress`` runs a suite file (JSON, or YAML for ``.yaml``/``.yml``; the format of
 ``hgcore.regression.models.Suite``, see docs/regression.md) in one of two modes:
 
-* locally (default, no service needed): renders every scene with ``worker.render.api.render_scene`` and
+* locally (default, no service needed): renders every scene with ``worker.render.chunks.render_scene`` and
   compares it with its baseline in ``--baseline DIR`` (``DIR/<scene>/image.exr``, ``variance.exr``,
   ``summary.json``) using the service's noise-aware metrics; ``--update-baseline`` then stores the new renders
   as the baselines;
@@ -107,7 +107,7 @@ def run_suite(
 
     settings = Settings()
     configure_mitsuba(settings.variant, settings.render_threads)
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     results = []
     for entry in suite.scenes:

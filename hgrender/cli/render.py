@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     configure_mitsuba(args.variant or settings.variant, settings.render_threads)
     from hgcore.noise_target import NoiseTarget
     from schemas.validation import validate_scene
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     parsed = validate_scene(scene, settings)
     target = NoiseTarget.from_options(args.target_rel_error, args.time_budget_s, args.target_quantile)

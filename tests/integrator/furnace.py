@@ -17,7 +17,7 @@ import numpy as np
 
 from hgcore.artifacts.exr import read_exr
 from schemas import validate_scene
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 BOX_HALF_SIZE_M = 3.0
 WALLS = [  # (centre axis, sign): the wall at sign·half-size along that axis, emitting inwards

@@ -12,7 +12,7 @@ import pytest
 from hgcore.artifacts.exr import read_exr
 from schemas import validate_scene
 from tests.integrator.scenes import plane_under_source
-from worker.render.api import plan_chunks, render_scene
+from worker.render.chunks import plan_chunks, render_scene
 
 SPHERE = {
     "type": "sphere",

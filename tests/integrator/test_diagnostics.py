@@ -17,7 +17,7 @@ from hgcore.artifacts.exr import read_exr
 from hgcore.optics.calculator import coherence_at
 from schemas import validate_scene
 from tests.integrator.scenes import plane_under_source
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 SIZE = 24
 CAMERA_HEIGHT_M = 3.0

@@ -10,7 +10,7 @@ import pytest
 from hgcore.artifacts.exr import read_exr
 from schemas import validate_scene
 from tests.support.scenes import example
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 EXAMPLES = sorted((Path(__file__).parents[2] / "schemas" / "examples").glob("*.json"))
 

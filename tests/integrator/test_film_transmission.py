@@ -36,7 +36,7 @@ from hgcore.optics.thin_film import (
 )
 from schemas import build, validate_scene
 from tests.integrator.scenes import coated_plane
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 THICKNESS_M = 1.0e-6
 FILM_IOR = 2.1

@@ -24,7 +24,7 @@ from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.thin_film import film_shear
 from schemas import validate_scene
 from tests.support.scenes import example
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
 

@@ -16,7 +16,7 @@ import pytest
 
 from hgcore.artifacts.exr import read_exr
 from schemas import build, validate_scene
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 BOX = build.scene(
     "object in a box",

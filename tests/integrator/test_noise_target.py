@@ -16,7 +16,7 @@ from hgcore.errors import InputError
 from hgcore.noise_target import NoiseTarget, next_round_spp
 from schemas import validate_scene
 from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
-from worker.render.api import ChunkSpec, chunk_seed, render_scene, render_to_dir
+from worker.render.chunks import ChunkSpec, chunk_seed, render_scene, render_to_dir
 
 
 @pytest.fixture(scope="module")

@@ -45,7 +45,7 @@ from hgcore.optics.thin_film import bounded_reflectance, film_reflectance_terms
 from schemas import build, validate_scene
 from tests.integrator.scenes import coated_plane
 from worker.mitsuba_setup import configured_mitsuba
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 from worker.render.emitters import CylinderModes, EmitterGeometry, EmitterKind, EmitterTable
 
 MODES = 16

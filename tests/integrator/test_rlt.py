@@ -12,7 +12,7 @@ from hgcore.artifacts.layout import VARIANCE_EXR
 from schemas import validate_scene
 from tests.render.scenes import COATED_PLANE, constant_spectrum
 from tests.support.scenes import example
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 
 def render_bands(scene: dict, out: Path, integrator: str) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,7 @@ import numpy as np
 
 from hgcore.artifacts.exr import read_exr
 from schemas import build, validate_scene
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 SCENE = build.scene(
     "floor lit by a wall",

@@ -25,7 +25,7 @@ import pytest
 
 from hgcore.artifacts.exr import read_exr
 from schemas import build, validate_scene
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 K_PER_M = 2 * math.pi / 550e-9
 PATCH_CENTRE = np.array([-0.5, 1.0, 0.0])

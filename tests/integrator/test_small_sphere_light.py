@@ -26,7 +26,7 @@ import pytest
 
 from hgcore.artifacts.exr import read_exr
 from schemas import build, validate_scene
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 HEIGHT_M = 0.6
 POWER_W = 1.0

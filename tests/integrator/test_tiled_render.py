@@ -24,7 +24,7 @@ from hgcore.artifacts.running_sums import RunningSums
 from hgcore.noise_target import ImageErrors
 from schemas import validate_scene
 from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
-from worker.render.api import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
+from worker.render.chunks import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
 from worker.render.renderer import row_order, tile_rows, tile_seed
 
 

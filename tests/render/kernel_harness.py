@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from schemas import validate_scene
-from worker.render.api import renderer_for
 from worker.render.bsdfs import IncidentCoherence
+from worker.render.chunks import renderer_for
 
 
 def probe_scene(material: dict[str, Any]) -> dict[str, Any]:

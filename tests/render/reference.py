@@ -27,7 +27,7 @@ import numpy as np
 from schemas.validation import validate_scene
 from tests.render.exr import read_channels, spectral_stack
 from worker.mitsuba_setup import configured_mitsuba
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 from worker.render.scene_compiler import CompiledScene, SceneCompiler
 
 

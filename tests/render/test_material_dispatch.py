@@ -17,10 +17,10 @@ import pytest
 
 from schemas import validate_scene
 from tests.render.kernel_harness import KernelProbe, probe_scene
-from worker.render.api import renderer_for
 from worker.render.bsdfs import IncidentCoherence, VertexSpectra
 from worker.render.bsdfs.common import ShadingPoint
 from worker.render.bsdfs.dispatch import MaterialKernels
+from worker.render.chunks import renderer_for
 
 MATERIALS = {
     "diffuse": {"type": "diffuse", "reflectance": 0.6},

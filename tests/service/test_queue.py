@@ -85,7 +85,7 @@ def test_four_chunk_job_equals_local_split_render(two_workers: LiveService, tmp_
     """The service's 4-chunk merge and ``render_scene(..., chunks=4)`` use the same plan (spp split and
     seeds) and the same arithmetic (each chunk's sums rounded to float32 once, added in float64 in chunk
     order, tile by tile), so their images are bitwise equal."""
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     client = two_workers.client()
     scene = tiny_scene(spp=8)

@@ -1,4 +1,5 @@
-"""The renderer's public interface: plan chunks, render a chunk, merge chunks, render a whole scene.
+"""Chunked rendering, the renderer's public interface: plan chunks, render a chunk, merge chunks, render a
+whole scene (the local render is the plan of one chunk, or K with --chunks).
 
 A render of S samples per pixel with seed s splits into K chunks of ⌈S/K⌉ or ⌊S/K⌋ spp with distinct
 derived seeds (``plan_chunks``). The image renders in tiles (row bands, ``Renderer.tiles``) whose samples
