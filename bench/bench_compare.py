@@ -32,7 +32,14 @@ SIZE_PX, SPP, BANDS, REPEATS = 128, 64, 16, 3
 def _probe(scene_name: str) -> float:
     """Median seconds of REPEATS timed renders of ``scene_name`` in this process (after warm-up)."""
     from schemas.validation import validate_scene
-    from worker.render.api import renderer_for
+    from worker import mitsuba_setup
+
+    if hasattr(mitsuba_setup, "configure_mitsuba"):  # older trees chose the variant when imported
+        mitsuba_setup.configure_mitsuba("llvm_ad_spectral")
+    try:
+        from worker.render.chunks import renderer_for
+    except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
+        from worker.render.api import renderer_for  # type: ignore[no-redef]
 
     data = json.loads((ROOT / "schemas" / "examples" / scene_name).read_text())
     data["film"] = {**data["film"], "width": SIZE_PX, "height": SIZE_PX, "spp": SPP, "bands": BANDS}

@@ -15,7 +15,7 @@ For each scene of :data:`SCENES` (the Fig. 7 sphere-source shell and the Fig. 8 
   The time of level n is the render time of its chunks (scene load plus ``Renderer.render_sums``, wall
   clock); one warm-up chunk per integrator compiles the kernels first and is reported separately
   (``compile_s``), so the times are those of a warm renderer.
-* the **errors** of each level against the reference: ΔE₀₀ per pixel (``service.image_metrics``: band
+* the **errors** of each level against the reference: ΔE₀₀ per pixel (``hgcore.image_metrics``: band
   radiances → XYZ → CIELAB at the exposure that maps the reference's 99th-percentile luminance to white,
   the regression runs' and the compare view's rule), its mean and 95th percentile; and per band
   rRMSE_b = √(mean_px (x_b − ref_b)²) / mean_px ref_b.
@@ -52,8 +52,8 @@ from hgcore.artifacts.images import images_from_sums
 from hgcore.artifacts.layout import BandLayout
 from hgcore.artifacts.pixel_sums import PixelSums
 from hgcore.files import atomic_write_bytes
+from hgcore.image_metrics import delta_e00_map, metric_exposure_ev
 from schemas import EXAMPLES_DIR
-from service.image_metrics import delta_e00_map, metric_exposure_ev
 
 SCENES = ("fig7_thin_film_sphere_light", "fig8_mirror_coherence")
 INTEGRATORS = ("hg_path", "rlt")
@@ -81,16 +81,17 @@ def bench_scene(name: str, resolution_px: int, integrator: str) -> dict[str, Any
 
 def render_sums(scene: dict[str, Any], spp: int, seed: int) -> tuple[PixelSums, float]:
     """One chunk of ``spp`` samples per pixel with ``seed``: its sums and wall-clock seconds."""
-    from worker.render.api import as_scene, renderer_for
+    from schemas.validation import validate_scene
+    from worker.render.chunks import renderer_for
 
     start = time.perf_counter()
-    sums = renderer_for(as_scene(scene)).render_sums(spp, seed)  # scene load included, as a chunk's time
+    sums = renderer_for(validate_scene(scene)).render_sums(spp, seed)  # scene load included, as a chunk's
     return sums, time.perf_counter() - start
 
 
 def chunk_seed(base: int, index: int) -> int:
     """The seed of chunk ``index`` of a sequence: ``plan_chunks``'s spacing, so that no two coincide."""
-    from worker.render.api import plan_chunks
+    from worker.render.chunks import plan_chunks
 
     return plan_chunks(index + 1, index + 1, base)[index].seed
 
@@ -252,6 +253,9 @@ def convergence(
 
 def main(quick: bool = False, plot_path: Path | None = PLOT_PATH) -> dict[str, Any]:
     """Run the bench (small with ``quick``), write its JSON (and, unless quick, the plot) and return it."""
+    from worker.mitsuba_setup import configure_mitsuba
+
+    configure_mitsuba("llvm_ad_spectral")
     resolution = QUICK_RESOLUTION_PX if quick else RESOLUTION_PX
     levels = QUICK_LEVELS if quick else LEVELS
     reference_spp = QUICK_REFERENCE_SPP if quick else REFERENCE_SPP

@@ -26,9 +26,7 @@ import numpy as np
 
 from bench.machine import MachineLoad, write_results
 from schemas.validation import validate_scene
-from worker.mitsuba_setup import load_mitsuba
-from worker.render.renderer import Renderer
-from worker.render.scene_compiler import SceneCompiler
+from worker.mitsuba_setup import configure_mitsuba, configured_mitsuba
 
 SIZE_PX, SPP = 48, 16
 SEEDS = 24
@@ -66,13 +64,16 @@ def _summary(renders: np.ndarray, mask: np.ndarray) -> dict[str, float]:
 
 
 def main() -> dict[str, Any]:
+    configure_mitsuba("llvm_ad_spectral")  # this benchmark's entry point, before the renderer is imported
     import OpenImageIO as oiio
 
     from tests.render.images import sky_image
     from tests.render.reference import band_box_specfilm
+    from worker.render.renderer import Renderer
+    from worker.render.scene_compiler import SceneCompiler
 
     load = MachineLoad()
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     with tempfile.TemporaryDirectory(prefix="hgrender-bench-environment-") as tmp:
         folder = Path(tmp)
         image = sky_image(256, 128, (slice(40, 44), slice(80, 88)), (400.0, 360.0, 300.0))

@@ -14,7 +14,7 @@ Measured (issue 3, "Performance"; targets: 1 mode ≤ 1.5× ``path``, 16 modes �
   interleave the integrators and each keeps its best of ``repeats`` (the machine is shared).
 * samples/s = width·height·spp / seconds; ratios hg(1 mode)/path and hg(16 modes)/hg(1 mode).
 * peak memory: a 1024×1024, 32-band render of the same scene at ``MEMORY_SPP`` spp through the public API
-  (``worker.render.api.render_scene``, EXR writing included) in a fresh subprocess, whose
+  (``worker.render.chunks.render_scene``, EXR writing included) in a fresh subprocess, whose
   ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` is the peak resident set (KiB on Linux); skipped by
   ``--quick``.
 
@@ -131,7 +131,7 @@ def _renderer(mi: Any, scene: dict[str, Any]) -> Any:
     from worker.render.renderer import Renderer
     from worker.render.scene_compiler import SceneCompiler
 
-    return Renderer(SceneCompiler(mi).compile(validate_scene(scene)), VARIANT)
+    return Renderer(SceneCompiler(mi).compile(validate_scene(scene)))
 
 
 def _hg_renders(mi: Any, scene_name: str) -> dict[str, Callable[[int], Any]]:
@@ -151,9 +151,9 @@ def measure_speed(repeats: int = REPEATS) -> dict[str, Any]:
     The Cornell box has no coherence-sensitive material, so there the modes cost nothing by construction;
     the Fig. 7 thin-film scene (sphere light) is where they are evaluated (visibilities per film vertex).
     """
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configure_mitsuba
 
-    mi = load_mitsuba(VARIANT)
+    mi = configure_mitsuba(VARIANT)
     import drjit as dr
 
     samples = RESOLUTION_PX * RESOLUTION_PX * SPP
@@ -190,10 +190,10 @@ def measure_speed(repeats: int = REPEATS) -> dict[str, Any]:
 def _memory_probe() -> dict[str, Any]:
     """Run in a fresh process: peak RSS of one 1024×1024, 32-band render through the public API."""
     from schemas.validation import validate_scene
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configure_mitsuba
 
-    load_mitsuba(VARIANT)
-    from worker.render.api import render_scene
+    configure_mitsuba(VARIANT)
+    from worker.render.chunks import render_scene
 
     scene = validate_scene(example_scene(CORNELL_SCENE, MEMORY_RESOLUTION_PX, MEMORY_SPP, MEMORY_BANDS, 1))
     baseline_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

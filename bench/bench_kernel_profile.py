@@ -74,12 +74,12 @@ def _probe(scene_name: str, with_mitsuba: bool) -> dict[str, list[dict[str, floa
     import numpy as np
 
     from schemas.validation import validate_scene
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configure_mitsuba
 
-    mi = load_mitsuba("llvm_ad_spectral")
+    mi = configure_mitsuba("llvm_ad_spectral")
     import drjit as dr
 
-    from worker.render.api import renderer_for
+    from worker.render.chunks import renderer_for
 
     data = json.loads((ROOT / "schemas" / "examples" / f"{scene_name}.json").read_text())
     data["film"] = {**data["film"], "width": SIZE_PX, "height": SIZE_PX, "spp": SPP, "bands": BANDS}

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import tempfile
 import time
@@ -29,6 +28,8 @@ from typing import Any
 
 from bench.bench_integrator import MAX_DEPTH, example_scene
 from bench.machine import MachineLoad, write_results
+from schemas import Scene, validate_scene
+from worker.mitsuba_setup import configure_mitsuba
 
 SCENES = ("cornell_box", "thin_film_sphere_light")
 RESOLUTION_PX = 64
@@ -43,17 +44,17 @@ QUANTILE_TARGET = 0.1
 GOAL_RATIO = 1.2
 
 
-def scene_of(name: str, spp: int, seed: int) -> dict[str, Any]:
+def scene_of(name: str, spp: int, seed: int) -> Scene:
     """The example ``name`` with the benchmark's film (1 HG mode, as the examples have) and ``seed``."""
     scene = example_scene(name, RESOLUTION_PX, spp, BANDS, modes=1)
     scene["film"]["seed"] = seed
-    return scene
+    return validate_scene(scene)
 
 
 def one(name: str, seed: int, rel_error: float, quantile: float | None) -> dict[str, Any]:
     """A target render and its oracle fixed render."""
     from hgcore.noise_target import NoiseTarget
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     target = NoiseTarget(rel_error=rel_error, quantile=quantile, time_budget_s=TIME_BUDGET_S)
     with tempfile.TemporaryDirectory() as tmp:
@@ -93,8 +94,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1])
     args = parser.parse_args(argv)
-    os.environ.setdefault("HGRENDER_VARIANT", "llvm_ad_spectral")
-    from worker.render.api import render_scene
+    configure_mitsuba("llvm_ad_spectral")
+    from worker.render.chunks import render_scene
 
     machine = MachineLoad()
     with tempfile.TemporaryDirectory() as tmp:

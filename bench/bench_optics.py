@@ -35,7 +35,7 @@ from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.grating import CD_GRATING, grating_eval
 from hgcore.optics.sources import source_coefficients
 from hgcore.optics.thin_film import gaussian_visibilities, thin_film_reflectance
-from worker.mitsuba_setup import load_mitsuba
+from worker.mitsuba_setup import configure_mitsuba
 
 SAMPLE_COUNT = 10_000_000
 WARM_REPEATS = 3
@@ -63,7 +63,7 @@ def _time_formula(formula: Callable[[], Any], count: int, repeats: int) -> dict[
 
 def main(count: int = SAMPLE_COUNT, repeats: int = WARM_REPEATS) -> dict[str, Any]:
     """Run the three measurements and write ``bench/results/optics.json``."""
-    load_mitsuba("llvm_ad_spectral")  # sets DRJIT_LIBLLVM_PATH to libLLVM 19 before Dr.Jit starts
+    configure_mitsuba("llvm_ad_spectral")  # sets DRJIT_LIBLLVM_PATH to libLLVM 19 before Dr.Jit starts
     import drjit as dr
     from drjit.llvm import Float
 

@@ -3,7 +3,7 @@
 Measured:
 
 * cost per sample: the Cornell box example at N×N px, ``SPP`` spp, ``BANDS`` bands, max depth 8, in
-  ``llvm_ad_spectral``, rendered through the public API (``worker.render.api.render_scene``: tiles,
+  ``llvm_ad_spectral``, rendered through the public API (``worker.render.chunks.render_scene``: tiles,
   accumulation, images and EXR writing included) in a fresh subprocess per measurement. JIT compilation
   is reported apart: the subprocess first renders the scene at 32² (which compiles the kernels; the
   timed render hits Dr.Jit's kernel cache, its IR does not depend on the image size) and reports that
@@ -57,17 +57,26 @@ def probe(resolution_px: int, spp: int, bands: int, target_rel_error: float = 0.
     """In this process: warm up at ``WARMUP_PX``, then time one render (with a noise target when
     ``target_rel_error`` > 0, ``spp`` its first round's); seconds and peak RSS per phase."""
     from hgcore.noise_target import NoiseTarget
-    from worker.render.api import render_scene
+    from schemas.validation import validate_scene
+    from worker import mitsuba_setup
+
+    if hasattr(mitsuba_setup, "configure_mitsuba"):  # older trees chose the variant when imported
+        mitsuba_setup.configure_mitsuba("llvm_ad_spectral")
+    try:
+        from worker.render.chunks import render_scene
+    except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
+        from worker.render.api import render_scene  # type: ignore[no-redef]
 
     target = NoiseTarget(rel_error=target_rel_error) if target_rel_error > 0 else None
 
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        render_scene(_scene(WARMUP_PX, 1, bands), Path(tmp) / "warmup")
+        render_scene(validate_scene(_scene(WARMUP_PX, 1, bands)), Path(tmp) / "warmup")
         warmup_s = time.perf_counter() - start
         load_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         start = time.perf_counter()
-        summary = render_scene(_scene(resolution_px, spp, bands), Path(tmp) / "render", target=target)
+        scene = validate_scene(_scene(resolution_px, spp, bands))
+        summary = render_scene(scene, Path(tmp) / "render", target=target)
         render_s = time.perf_counter() - start
     peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     spp = summary["spp"]

@@ -25,7 +25,7 @@ import json
 import math
 import statistics
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,9 +34,10 @@ from hgcore.artifacts.images import images_from_sums
 from hgcore.colour import linear_srgb_to_lab
 from schemas import EXAMPLES_DIR
 from schemas.validation import validate_scene
-from worker.mitsuba_setup import load_mitsuba
-from worker.render.renderer import Renderer
-from worker.render.scene_compiler import SceneCompiler
+from worker.mitsuba_setup import configure_mitsuba
+
+if TYPE_CHECKING:
+    from worker.render.renderer import Renderer
 
 MODES = ("uniform", "importance")
 SPPS = (16, 64)
@@ -72,8 +73,12 @@ def scenes() -> dict[str, dict[str, Any]]:
 
 
 def _renderer(scene: dict[str, Any], mode: str) -> Renderer:
+    from worker.mitsuba_setup import configured_mitsuba
+    from worker.render.renderer import Renderer
+    from worker.render.scene_compiler import SceneCompiler
+
     scene = {**scene, "film": {**scene["film"], "wavelength_sampling": mode}}
-    return Renderer(SceneCompiler(load_mitsuba()).compile(validate_scene(scene)))
+    return Renderer(SceneCompiler(configured_mitsuba()).compile(validate_scene(scene)))
 
 
 def _rgb(renderer: Renderer, spp: int, seed: int) -> np.ndarray:
@@ -128,6 +133,7 @@ def cost(scene: dict[str, Any], spp: int) -> dict[str, Any]:
 
 
 def main() -> dict[str, Any]:
+    configure_mitsuba("llvm_ad_spectral")
     load = MachineLoad()
     results: dict[str, Any] = {}
     for name, scene in scenes().items():

@@ -46,8 +46,3 @@ def atomic_write_stream(path: Path, write: Callable[[BinaryIO], object], mode: i
 def atomic_write_bytes(path: Path, data: bytes, mode: int | None = None) -> None:
     """Replace ``path`` with ``data`` atomically."""
     atomic_write_stream(path, lambda stream: stream.write(data), mode=mode)
-
-
-def atomic_write_text(path: Path, text: str, mode: int | None = None) -> None:
-    """Replace ``path`` with ``text`` (UTF-8) atomically."""
-    atomic_write_bytes(path, text.encode("utf-8"), mode=mode)

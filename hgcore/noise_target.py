@@ -14,7 +14,7 @@ Both fall as 1/√N, so after a round of N samples with error e the total that j
 as N·(e/E)²; the next round renders the difference (at least N/16 so that rounds stay worth their
 overhead, at most 8N so that a lucky low early estimate cannot run away), capped by the time left at the
 rate measured so far. Each round is a chunk with the next chunk index's seed (the renderer's
-``worker.render.api.chunk_seed``), so
+``worker.render.chunks.chunk_seed``), so
 the result is the same as a fixed render of those chunks: bitwise deterministic given the target (a time
 budget makes the number of rounds depend on the machine's speed, by nature).
 """
@@ -31,7 +31,6 @@ import numpy as np
 from hgcore.artifacts.pixel_sums import PixelSums
 from hgcore.errors import InputError
 
-RECORD_FIELDS = ("target_rel_error", "time_budget_s", "target_quantile")
 MIN_ROUND_FRACTION = 1 / 16
 MAX_ROUND_GROWTH = 8
 
@@ -69,21 +68,6 @@ class NoiseTarget:
         if rel_error is None and time_budget_s is None and quantile is None:
             return None
         return cls(rel_error, time_budget_s, quantile)
-
-    def record_fields(self) -> dict[str, str]:
-        """The target as a job record's text fields (absent parts: empty)."""
-        return {
-            name: "" if value is None else repr(float(value))
-            for name, value in zip(
-                RECORD_FIELDS, (self.rel_error, self.time_budget_s, self.quantile), strict=True
-            )
-        }
-
-    @classmethod
-    def from_record(cls, record: dict[str, str]) -> NoiseTarget | None:
-        """The target of a job record (``record_fields``), or None for a fixed-spp job."""
-        values = [float(record[name]) if record.get(name) else None for name in RECORD_FIELDS]
-        return cls.from_options(*values)
 
     @property
     def metric(self) -> str:

@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 from typing import Literal
 
-from pydantic import AliasChoices, Field, field_validator, model_validator
+from pydantic import AliasChoices, Field, ValidationInfo, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from hgcore.errors import InputError
@@ -184,18 +184,11 @@ class Settings(SceneLimits):
     )
     regression_webhook_timeout_s: float = Field(10.0, gt=0, description="Timeout of one webhook POST (s).")
 
-    @field_validator("chunk_retry_intervals_s")
+    @field_validator("chunk_retry_intervals_s", "regression_webhook_retry_intervals_s")
     @classmethod
-    def _intervals_non_negative(cls, value: list[int]) -> list[int]:
+    def _intervals_non_negative(cls, value: list[float], info: ValidationInfo) -> list[float]:
         if any(v < 0 for v in value):
-            raise InputError("chunk_retry_intervals_s: intervals must be >= 0 seconds")
-        return value
-
-    @field_validator("regression_webhook_retry_intervals_s")
-    @classmethod
-    def _webhook_intervals_non_negative(cls, value: list[float]) -> list[float]:
-        if any(v < 0 for v in value):
-            raise InputError("regression_webhook_retry_intervals_s: intervals must be >= 0 seconds")
+            raise InputError(f"{info.field_name}: intervals must be >= 0 seconds")
         return value
 
     @model_validator(mode="after")

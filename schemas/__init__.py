@@ -7,7 +7,7 @@ from pathlib import Path
 
 from schemas.errors import SceneError, SceneProblem
 from schemas.scene import SCHEMA_ID, Scene
-from schemas.validation import validate_scene, validate_scene_json
+from schemas.validation import validate_scene, validate_scene_json, with_film_overrides
 
 EXAMPLES_DIR = Path(__file__).resolve().parent / "examples"
 """The example scenes shipped with the package (``*.json``)."""
@@ -20,4 +20,5 @@ __all__ = [
     "SceneProblem",
     "validate_scene",
     "validate_scene_json",
+    "with_film_overrides",
 ]

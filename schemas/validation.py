@@ -309,3 +309,20 @@ def validate_scene_json(text: str | bytes, limits: SceneLimits | None = None) ->
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
         raise SceneError.at("", f"not valid JSON: {error}") from None
     return validate_scene(data, limits)
+
+
+def override_film(document: dict[str, Any], **film: Any) -> dict[str, Any]:
+    """The scene document with the film fields in ``film`` that are not None replaced (not validated)."""
+    changes = {key: value for key, value in film.items() if value is not None}
+    if not changes:
+        return document
+    return {**document, "film": {**document.get("film", {}), **changes}}
+
+
+def with_film_overrides(scene: Scene, limits: SceneLimits | None = None, **film: Any) -> Scene:
+    """The scene with the film fields in ``film`` that are not None replaced (a request's or a command
+    line's ``spp``, ``seed``, ``integrator``, ...), validated again, so that ``limits`` apply to the values
+    that will actually be rendered."""
+    if all(value is None for value in film.values()):
+        return scene
+    return validate_scene(override_film(scene.to_json_dict(), **film), limits)

@@ -15,6 +15,7 @@ from fastapi_offline import FastAPIOffline
 
 from hgcore import __version__
 from hgcore.errors import InputError
+from hgcore.jobs.lifecycle import JobLifecycle
 from hgcore.redis_clients import async_redis_client, redis_client
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
@@ -26,6 +27,7 @@ from service.api.routes import schedules as regression_routes
 from service.auth import RequestAuthenticator, TokenRegistry
 from service.jobs import JobService
 from service.metrics import LatencyHistogram
+from service.viewer_images import ViewerImages
 
 DESCRIPTION = """Render partially-coherent light in Hermite-Gauss space (Steinberg & Yan 2021).
 
@@ -73,7 +75,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.redis = client
     app.state.aredis = async_redis_client(settings.redis_url)
     app.state.store = store
-    app.state.jobs = JobService(client, store, settings, aclient=app.state.aredis)
+    app.state.jobs = JobService(JobLifecycle(client, store, aclient=app.state.aredis), settings)
     app.state.tokens = TokenRegistry(client)
     app.state.authenticator = RequestAuthenticator(app.state.aredis, settings.rate_limit_per_minute)
     app.state.scene_limits = settings  # Settings extends SceneLimits: one read of the environment
@@ -83,7 +85,8 @@ def create_app(settings: Settings) -> FastAPI:
     for router in (jobs.router, coherence.router, schemas.router, tokens.router, health.router):
         app.include_router(router)
     app.include_router(regression_routes.router)
-    viewer.install(app)  # viewer data routes and their decoded-image cache
+    app.state.viewer_images = ViewerImages(app.state.jobs, store)  # decoded images, uploaded EXRs
+    app.include_router(viewer.router)
     web.install(app)  # the browser viewer at /
     # The last added is outermost: latency also times the 413s the size limit answers before routing.
     app.add_middleware(BodySizeLimitMiddleware, max_bytes=settings.max_request_bytes)

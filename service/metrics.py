@@ -14,7 +14,6 @@ from collections.abc import Sequence
 import redis
 from rq import Queue
 
-from hgcore.jobs.keys import RENDER_SECONDS_TOTAL, SAMPLES_TOTAL
 from hgcore.settings import QUEUE_NAMES
 from service.jobs import JobService
 
@@ -86,9 +85,8 @@ def render_metrics(client: redis.Redis, jobs: JobService, latency: LatencyHistog
     ]
     lines += [f'hgrender_queue_running{{queue="{q.name}"}} {q.started_job_registry.count}' for q in queues]
     lines += ["# HELP hgrender_jobs Render jobs by status.", "# TYPE hgrender_jobs gauge"]
-    lines += [f'hgrender_jobs{{status="{s}"}} {n}' for s, n in jobs.counts_by_state().items()]
-    render_s = float(client.get(RENDER_SECONDS_TOTAL) or 0.0)
-    samples = int(client.get(SAMPLES_TOTAL) or 0)
+    lines += [f'hgrender_jobs{{status="{s}"}} {n}' for s, n in jobs.lifecycle.counts_by_state().items()]
+    render_s, samples = jobs.lifecycle.render_totals()
     lines += [
         "# HELP hgrender_render_seconds_total Wall-clock seconds spent rendering chunks.",
         "# TYPE hgrender_render_seconds_total counter",

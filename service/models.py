@@ -1,7 +1,8 @@
 """Request and response bodies of the HTTP API (pydantic v2); their examples feed the OpenAPI document.
 
-The job's own view (``JobView``) and statuses are the job domain's (``hgcore.jobs``); this module holds
-what only the API speaks: request bodies, lists, artifacts, tokens and error bodies.
+The job's own view (``JobView``) and statuses are the job domain's (``hgcore.jobs``), the regression
+bodies the regression domain's (``hgcore.regression.models``); this module holds what only the API speaks:
+request bodies, lists, artifacts, tokens, error bodies and the viewer's data.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from hgcore.jobs.status import JobStatus, Priority
 from hgcore.jobs.views import JobView
 from schemas import build
+from schemas.gallery import GalleryView
 
 
 class JobOptions(BaseModel):
@@ -147,3 +149,97 @@ class Problem(BaseModel):
 
     detail: str
     errors: list[dict[str, Any]] | None = None
+
+
+# ---- the viewer's data (``service.api.routes.viewer``) ------------------------------------------------
+
+
+class LayerView(BaseModel):
+    name: str = Field(examples=["S0.555,000000nm"])
+    kind: str = Field(description="rgb, band, coherence or geometry.")
+    unit: str = Field(examples=["W·m⁻²·sr⁻¹·nm⁻¹"])
+    wavelength_nm: float | None = None
+    channels: int = Field(description="3 for `rgb` (interleaved R, G, B), else 1.")
+    min: float | None = None
+    max: float | None = None
+    p01: float | None = Field(None, description="1st percentile (diagnostics: over covered pixels).")
+    p99: float | None = Field(None, description="99th percentile.")
+
+
+class LayerCatalogue(BaseModel):
+    job_id: str
+    width: int
+    height: int
+    wavelengths_nm: list[float]
+    layers: list[LayerView]
+    partial: bool = Field(
+        False,
+        description="True while the job runs: merged from its finished chunks (a noise-target job: the "
+        "rounds finished so far, replaced after each round).",
+    )
+    spp: int | None = Field(
+        None, description="Samples per pixel of a partial image (a running job's preview); null otherwise."
+    )
+    uploaded: bool = Field(False, description="True for an EXR dropped into the viewer (POST /v1/images).")
+    exposure_ev: float = Field(
+        description="Automatic exposure (EV): maps the 99th percentile of luminance Y (from the bands) to "
+        "white; the viewer and compare view open at it, and regression runs use it for ΔE₀₀ and ꟻLIP."
+    )
+
+
+class UploadedImage(BaseModel):
+    id: str = Field(description="Use it in place of a job id with every viewer endpoint (`#/view/<id>`).")
+    width: int
+    height: int
+    wavelengths_nm: list[float]
+
+
+class PixelView(BaseModel):
+    x: int
+    y: int
+    wavelengths_nm: list[float]
+    spectrum: list[float | None]
+    spectrum_unit: str
+    rgb: list[float | None] = Field(description="Linear sRGB.")
+    coherence_covered: bool = Field(description="Whether the pixel carries coherence diagnostics.")
+    coherence: dict[str, float | None] = Field(
+        description="l1_um, l2_um (µm), angle (rad, image +y up), anisotropy, area_um2 (µm²), r_m (m), "
+        "Mxx, Mxy, Myy (m⁻²)."
+    )
+    coherence_weight: float | None
+    depth_m: float | None
+    normal: list[float | None]
+    albedo: list[float | None]
+
+
+class Ellipse(BaseModel):
+    x: int = Field(description="Pixel column (from the left).")
+    y: int = Field(description="Pixel row (from the top).")
+    l1_um: float
+    l2_um: float
+    angle: float = Field(description="Orientation of the ℓ₁ axis (rad, from +x towards image +y up).")
+    area_um2: float
+
+
+class EllipseGrid(BaseModel):
+    job_id: str
+    width: int
+    height: int
+    spacing: int
+    ellipses: list[Ellipse]
+
+
+class ExampleScene(BaseModel):
+    name: str = Field(examples=["cornell_box.json"])
+    title: str = Field(examples=["Cornell box"])
+    figure: str | None = Field(
+        default=None, description="The paper figure a gallery scene reproduces.", examples=["Fig. 7 (right)"]
+    )
+    view: GalleryView | None = Field(
+        default=None, description="The most telling view of a finished render of a gallery scene."
+    )
+    thumbnail: str | None = Field(
+        default=None,
+        description="Path of a gallery scene's preview thumbnail (PNG).",
+        examples=["/v1/examples/fig7_thin_film_cylinder_light/thumbnail.png"],
+    )

@@ -14,25 +14,18 @@ from pathlib import Path
 from typing import Any
 
 from hgcore.settings import SceneLimits
-from schemas import SceneError, validate_scene, validate_scene_json
+from schemas import Scene, SceneError, validate_scene, validate_scene_json, with_film_overrides
 from schemas.textures import require_no_images
 from service.models import JobOptions
 
 USD_SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd", ".usdz", ".zip")
 
 
-def apply_overrides(scene_json: dict[str, Any], options: JobOptions, limits: SceneLimits) -> dict[str, Any]:
-    """The validated scene with the request's spp/seed/integrator written into its film, validated
-    again."""
-    overrides = {
-        key: value
-        for key, value in (("spp", options.spp), ("seed", options.seed), ("integrator", options.integrator))
-        if value is not None
-    }
-    if not overrides:
-        return scene_json
-    film = {**scene_json.get("film", {}), **overrides}
-    return validate_scene({**scene_json, "film": film}, limits).to_json_dict()
+def apply_options(scene: Scene, options: JobOptions, limits: SceneLimits) -> dict[str, Any]:
+    """The validated scene's document with the request's spp/seed/integrator written into its film
+    (``schemas.with_film_overrides``: validated again)."""
+    film = {"spp": options.spp, "seed": options.seed, "integrator": options.integrator}
+    return with_film_overrides(scene, limits, **film).to_json_dict()
 
 
 #: Why a JSON scene over HTTP cannot name an image: it has no bundle to read it from.
@@ -46,7 +39,7 @@ def scene_from_json(data: Any, options: JobOptions, limits: SceneLimits) -> dict
     """A JSON scene (already parsed) → validated scene document."""
     scene = validate_scene(data, limits)
     require_no_images(scene, NO_BUNDLE)
-    return apply_overrides(scene.to_json_dict(), options, limits)
+    return apply_options(scene, options, limits)
 
 
 def scene_from_upload(
@@ -62,7 +55,7 @@ def scene_from_upload(
     if suffix == ".json":
         validated = validate_scene_json(content, limits)
         require_no_images(validated, NO_BUNDLE)
-        return apply_overrides(validated.to_json_dict(), options, limits), {}
+        return apply_options(validated, options, limits), {}
     if suffix not in USD_SUFFIXES:
         raise SceneError.at("", f"scene file {name!r}: expected .json or one of {', '.join(USD_SUFFIXES)}")
     from schemas.usd_import import import_usd_isolated
@@ -79,4 +72,4 @@ def scene_from_upload(
             for path in sorted(bundle_dir.rglob("*"))
             if path.is_file()
         }
-    return apply_overrides(scene.to_json_dict(), options, limits), files
+    return apply_options(scene, options, limits), files

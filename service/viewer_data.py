@@ -51,9 +51,9 @@ from hgcore.artifacts.layout import (
 from hgcore.artifacts.pixel_sums import PixelSums, read_partial
 from hgcore.colour import XYZ_TO_LINEAR_SRGB, radiance_xyz
 from hgcore.errors import InputError
+from hgcore.image_metrics import PERCEPTUAL_METRICS, metric_exposure_ev, perceptual_map
 from hgcore.imaging import REC709_LUMINANCE, auto_exposure_ev, display_rgb8
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
-from service.image_metrics import PERCEPTUAL_METRICS, metric_exposure_ev, perceptual_map
 
 RGB_LAYER = "rgb"
 COMPARE_MODES: tuple[str, ...] = ("abs", "rel", *PERCEPTUAL_METRICS)
@@ -125,7 +125,7 @@ class DecodedImage:
         return np.stack([self.channels[name] for name in self.band_names], axis=-1)
 
     def exposure_ev(self) -> float:
-        """The automatic exposure (``service.image_metrics.metric_exposure_ev``; computed once): the
+        """The automatic exposure (``hgcore.image_metrics.metric_exposure_ev``; computed once): the
         viewer's and the compare view's default, and what a regression run uses for its colour metrics."""
         if self._exposure_ev is None:
             # One band has no colour (bands → XYZ needs two): then the RGB luminance rule, the same EV.
@@ -470,7 +470,7 @@ def difference_map(
     * ``rel``: mean over R, G, B of |sample − reference| / max(|reference|, ε), ε = 1 % of the
       reference's mean luminance (keeps black pixels from dividing by zero);
     * ``de2000``, ``flip``: CIEDE2000 ΔE₀₀ or ꟻLIP of the two spectral images at ``exposure_ev``
-      (default: the reference's automatic exposure), by ``service.image_metrics`` as regression runs do.
+      (default: the reference's automatic exposure), by ``hgcore.image_metrics`` as regression runs do.
     """
     if (reference.width, reference.height) != (sample.width, sample.height):
         raise InputError(

@@ -1,5 +1,6 @@
-"""Shared fixtures: a private Redis server for the session (never the machine's 127.0.0.1:6379) and one
-headless Chromium for every browser test (Playwright's sync API allows one instance per session)."""
+"""Shared fixtures (``tests/README.md``): a private Redis server for the session (never the machine's
+127.0.0.1:6379), the live service each test module runs against, and one headless Chromium for every
+browser test (Playwright's sync API allows one instance per session). Helpers live in ``tests/support``."""
 
 from __future__ import annotations
 
@@ -9,7 +10,17 @@ from typing import Any
 
 import pytest
 
+from hgcore.settings import Settings
 from service.redis_server import RedisServer
+from tests.support.live_service import LiveService, running_service
+from worker.mitsuba_setup import configure_mitsuba
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The test session is one process with one ``Settings`` (its environment): like every entry point,
+    it configures Mitsuba's variant and thread count before any test module imports the renderer."""
+    settings = Settings()
+    configure_mitsuba(settings.variant, settings.render_threads)
 
 
 @pytest.fixture(scope="session")
@@ -25,6 +36,15 @@ def redis_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RedisServ
 @pytest.fixture(scope="session")
 def redis_url(redis_server: RedisServer) -> str:
     return redis_server.url
+
+
+@pytest.fixture(scope="module")
+def live_service(redis_url: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveService]:
+    """The API (uvicorn in a thread, auth on) over the session's Redis, flushed for each module, with a
+    fresh data dir and admin token; tests start the workers they need (``start_worker``,
+    ``ensure_worker``; ``render`` does). Its workers are stopped when the module ends."""
+    with running_service(redis_url, tmp_path_factory.mktemp("service-data")) as service:
+        yield service
 
 
 CHROMIUM = Path("/usr/bin/chromium")

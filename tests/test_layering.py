@@ -1,7 +1,9 @@
-"""The package layering of ``docs/architecture.md``, as import-linter checks it in ``make lint``.
+"""The package layering of ``docs/architecture.md``, as import-linter checks it in ``make lint``; no import
+cycle between production modules; a worker that runs without the ``service`` package.
 
 The project's own contracts must hold, and the same contracts must *fail* on a tree with a back-edge
-(the shared core importing the service, the service importing Mitsuba), so a broken layer cannot pass.
+(the shared core importing the service, the service importing Mitsuba), so a broken layer cannot pass;
+likewise the cycle check must find a planted cycle.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import sys
 import tomllib
 from pathlib import Path
 
+import grimp
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -79,3 +82,96 @@ def test_a_back_edge_breaks_the_contracts(tmp_path: Path, module: str, source: s
     result = lint_imports(tmp_path / "contracts.ini", tmp_path)
     assert result.returncode == 1, result.stdout + result.stderr
     assert broken in result.stdout
+
+
+# ---- import cycles --------------------------------------------------------------------------------------
+
+
+def import_cycles(graph: grimp.ImportGraph) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan): each is a set of modules
+    that import each other around a cycle, lazily inside a function or not (grimp reads every import)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles: list[list[str]] = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        on_stack.add(module)
+        for imported in graph.find_modules_directly_imported_by(module):
+            if imported not in index:
+                visit(imported)
+                low[module] = min(low[module], low[imported])
+            elif imported in on_stack:
+                low[module] = min(low[module], index[imported])
+        if low[module] == index[module]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == module:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for module in sorted(graph.modules):
+        if module not in index:
+            visit(module)
+    return cycles
+
+
+def test_production_code_has_no_import_cycle() -> None:
+    graph = grimp.build_graph(*PACKAGES, cache_dir=None)
+    assert import_cycles(graph) == []
+
+
+def test_a_cycle_is_found(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The check finds a cycle closed by an import inside a function (the kind that used to tie
+    ``worker.tasks`` and ``worker.queue_worker`` together)."""
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "tasks.py").write_text("from pkg.queue_worker import PREFIX\n")
+    (tmp_path / "pkg" / "queue_worker.py").write_text(
+        "PREFIX = 1\ndef fail():\n    from pkg.tasks import x\n"
+    )
+    (tmp_path / "pkg" / "other.py").write_text("import pkg.tasks\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    graph = grimp.build_graph("pkg", cache_dir=None)
+    assert import_cycles(graph) == [["pkg.queue_worker", "pkg.tasks"]]
+
+
+# ---- a worker without the service -----------------------------------------------------------------------
+
+WITHOUT_SERVICE = """
+import importlib.abc, sys
+class NoService(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name == "service" or name.startswith("service."):
+            raise ModuleNotFoundError(f"No module named {name!r} (a worker image has no service/)")
+        return None
+sys.meta_path.insert(0, NoService())
+from rq.utils import import_attribute
+from hgcore.jobs.queue_graph import TASKS
+import worker.preload, worker.queue_worker
+for task in TASKS:
+    import_attribute(task)
+print("tasks:", len(TASKS))
+"""
+
+
+def test_a_worker_process_runs_without_the_service_package() -> None:
+    """Every task a worker runs (the API names them by dotted string, which import-linter cannot see),
+    the worker class and its preloading import with ``service`` absent, as in a worker-only image."""
+    result = subprocess.run(
+        [sys.executable, "-c", WITHOUT_SERVICE],
+        cwd=REPO_ROOT,
+        env={"PYTHONPATH": str(REPO_ROOT), "PATH": "/usr/bin:/bin"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "tasks: 4"

@@ -20,8 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from hgcore.files import atomic_write_bytes
-from schemas import EXAMPLES_DIR
+from hgcore.settings import Settings
+from schemas import EXAMPLES_DIR, validate_scene
 from schemas.gallery import GALLERY, THUMBNAIL_SIZE_PX, THUMBNAILS_DIR, GalleryEntry
+from worker.mitsuba_setup import configure_mitsuba
 
 ROOT = Path(__file__).resolve().parents[1]
 GALLERY_DIR = ROOT / "gallery"
@@ -47,7 +49,7 @@ def gallery_scene(entry: GalleryEntry, size_px: int | None, spp: int | None) -> 
 
 def render_entry(entry: GalleryEntry, size_px: int | None, spp: int | None, out_dir: Path) -> dict[str, Any]:
     """Render one entry into ``out_dir``; its summary.json gains ``wall_s`` and ``gallery`` fields."""
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     scene = gallery_scene(entry, size_px, spp)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -56,9 +58,7 @@ def render_entry(entry: GalleryEntry, size_px: int | None, spp: int | None, out_
     def progress(fraction: float) -> None:  # long renders show progress (one stderr line, redrawn)
         print(f"\r{entry.name}: {fraction:6.1%}", end="", file=sys.stderr, flush=True)
 
-    summary = render_scene(
-        scene, out_dir, spp=scene["film"]["spp"], chunks=PROGRESS_CHUNKS, progress=progress
-    )
+    summary = render_scene(validate_scene(scene), out_dir, chunks=PROGRESS_CHUNKS, progress=progress)
     print(file=sys.stderr)
     wall_s = time.perf_counter() - start
     summary = {
@@ -187,6 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", nargs="*", default=None, help="gallery names to render (default: all)")
     parser.add_argument("--defaults", action="store_true", help="render at each example's own film")
     args = parser.parse_args(argv)
+    settings = Settings()
+    configure_mitsuba(settings.variant, settings.render_threads)
     names = {entry.name for entry in GALLERY}
     unknown = set(args.only or ()) - names
     if unknown:

@@ -1,20 +1,27 @@
-"""Loading Mitsuba 3 with a working Dr.Jit backend and choosing the spectral variant.
+"""Configuring Mitsuba 3 for a process: a working Dr.Jit backend, the spectral variant, the thread count.
+
+A process's entry point configures Mitsuba once, from its own ``hgcore.settings.Settings``, before it
+imports the renderer: the queue worker (``worker.preload``), ``hgrender render`` and ``regress``, the
+gallery, the benchmarks and the test session (``tests/conftest.py``) call ``configure_mitsuba(variant,
+render_threads)``. The renderer's modules subclass variant-specific Mitsuba classes, so they bind the
+configured module when imported (``configured_mitsuba``), which changes nothing and fails clearly in a
+process that configured none: importing a module never selects a variant, starts a thread pool or
+writes the environment (the one exception is ``point_drjit_at_libllvm``, called by ``configure_mitsuba``).
 
 Dr.Jit's LLVM backend needs a recent libLLVM (Debian's ``libllvm19``; LLVM 14/15 crash), so the path is
-set through ``DRJIT_LIBLLVM_PATH`` before Mitsuba is imported. The variant is ``cuda_ad_spectral`` where
-an NVIDIA GPU is usable, else ``llvm_ad_spectral``; the setting ``variant`` (``HGRENDER_VARIANT``) or an
-explicit argument wins. The setting ``render_threads`` (``HGRENDER_RENDER_THREADS``) sizes Dr.Jit's CPU
-thread pool. Both are read from the process's ``hgcore.settings.Settings``.
+set through ``DRJIT_LIBLLVM_PATH`` before Mitsuba is first used. The variant is ``cuda_ad_spectral`` where
+an NVIDIA GPU is usable, else ``llvm_ad_spectral``; the setting ``variant`` (``HGRENDER_VARIANT``) names
+another. The setting ``render_threads`` (``HGRENDER_RENDER_THREADS``) sizes Dr.Jit's CPU thread pool.
 """
 
 from __future__ import annotations
 
 import glob
 import os
+import sys
 from types import ModuleType
 
 from hgcore.errors import InputError
-from hgcore.settings import Settings
 
 SUPPORTED_VARIANTS = ("llvm_ad_spectral", "cuda_ad_spectral")
 _LIBLLVM_PATTERNS = (
@@ -55,26 +62,36 @@ def _cuda_available(mitsuba: ModuleType) -> bool:
         return False
 
 
-def load_mitsuba(variant: str | None = None) -> ModuleType:
-    """Import Mitsuba, select a spectral variant and return the ``mitsuba`` module.
-
-    ``variant`` (default: the setting ``variant``) may be ``auto`` or one of ``SUPPORTED_VARIANTS``.
-    """
+def configure_mitsuba(variant: str = "auto", render_threads: int | None = None) -> ModuleType:
+    """Import Mitsuba, select the spectral ``variant`` (``auto`` or one of ``SUPPORTED_VARIANTS``) and size
+    Dr.Jit's CPU thread pool (None: all cores); return the ``mitsuba`` module. Called by a process's
+    entry point, from its settings (``settings.variant``, ``settings.render_threads``)."""
     point_drjit_at_libllvm()
     import mitsuba as mi
 
-    settings = Settings()
-    threads = settings.render_threads
-    if threads:
+    if render_threads:
         # Workers started side by side share the cores (`hgrender serve` sets cores // workers).
         import drjit as dr
 
-        dr.set_thread_count(int(threads))
-    requested = variant or settings.variant
+        dr.set_thread_count(int(render_threads))
+    requested = variant
     if requested == "auto":
         requested = "cuda_ad_spectral" if _cuda_available(mi) else "llvm_ad_spectral"
     if requested not in SUPPORTED_VARIANTS:
         raise InputError(f"variant: {requested!r} is not one of {', '.join(SUPPORTED_VARIANTS)} or 'auto'")
     if mi.variant() != requested:
         mi.set_variant(requested)
+    return mi
+
+
+def configured_mitsuba() -> ModuleType:
+    """The ``mitsuba`` module with the variant this process configured (``configure_mitsuba``); changes
+    nothing. The renderer's modules bind it when imported: Python integrators subclass variant-specific
+    classes."""
+    mi = sys.modules.get("mitsuba")
+    if mi is None or mi.variant() not in SUPPORTED_VARIANTS:
+        raise RuntimeError(
+            "Mitsuba is not configured in this process: call worker.mitsuba_setup.configure_mitsuba("
+            "settings.variant, settings.render_threads) before importing the renderer"
+        )
     return mi

@@ -9,7 +9,8 @@ StartedJobRegistry until its heartbeat lapses; any live worker's maintenance pas
 RQ fixes at monitoring interval + 60 s and this worker makes ``worker_heartbeat_grace_s``, and the
 idle wake-up between maintenance passes, which RQ ties to ``worker_ttl - 15`` and this worker caps at
 ``worker_maintenance_interval_s``. The queue tasks themselves live in ``worker.tasks`` (referenced by
-name, so this module never imports the renderer).
+name, so this module never imports the renderer nor the tasks); what both need (the settings the worker
+binds for its horses, the horses' temporary folders) lives in ``worker.horse``.
 
 Graceful shutdown (SIGTERM, as Kubernetes and ``docker stop`` send it): RQ's warm shutdown already takes
 no new chunk and waits for the running one. This worker bounds that wait by ``worker_shutdown_grace_s``:
@@ -21,9 +22,9 @@ overwrites the same artifact key, so a job ends with one set of artifacts either
 
 A job's final step (its merge, or the only step of a one-chunk job) fails the job itself when it raises on
 its last attempt. When it cannot, because its horse died (killed, out of memory) or its whole worker did
-on that attempt, this worker fails the job: in ``handle_job_failure`` for a dead horse, and in an
-exception handler for the abandoned step that a maintenance pass finds. A failed chunk of a multi-chunk job
-needs neither: the merge step, which runs after failed chunks too, reports it.
+on that attempt, this worker fails the job (``JobLifecycle.fail``): in ``handle_job_failure`` for a dead
+horse, and in an exception handler for the abandoned step that a maintenance pass finds. A failed chunk of
+a multi-chunk job needs neither: the merge step, which runs after failed chunks too, reports it.
 
 Redis outages (a restart of the private Redis, a failover): the worker's client retries every command for
 up to ``worker_redis_outage_s`` (bounded back-off), so a horse keeps rendering and the worker keeps its
@@ -44,15 +45,11 @@ import ctypes
 import logging
 import math
 import os
-import re
-import shutil
 import signal
 import socket
-import tempfile
 import threading
 import time
 import uuid
-from pathlib import Path
 from types import FrameType
 from typing import Any
 
@@ -69,12 +66,13 @@ from rq.scripts import release_lock
 from rq.utils import now
 
 from hgcore.errors import InputError
+from hgcore.jobs.lifecycle import JobLifecycle
 from hgcore.jobs.queue_graph import FINAL_STEP_TASKS
 from hgcore.jobs.reconcile import QueueReconciler
-from hgcore.jobs.records import JobRecords
 from hgcore.redis_clients import redis_client
 from hgcore.settings import QUEUE_NAMES, Settings
 from hgcore.store import store_from_settings
+from worker.horse import bind_settings, remove_dead_horse_temp_dirs, remove_horse_temp_dirs
 
 SCHEDULER_LOCK_STALE_S = 10.0
 """A scheduler lock not refreshed for this long belongs to a dead scheduler (a live one refreshes it every
@@ -86,8 +84,6 @@ minutes. Cleaning takes milliseconds; 30 s bounds that blind spot and still neve
 at once."""
 RECONCILE_DUE_KEY = "hgrender:reconcile-due"
 """Exists (with a TTL of ``reconcile_interval_s``) while the last periodic reconciliation is recent."""
-HORSE_TEMP_PREFIX = "hgrender-horse{pid}-"
-"""Prefix of the temporary folders of the work horse with process id ``pid`` (``worker.tasks``)."""
 SCHEDULER_STOP_DEADLINE_S = 5.0
 """Longest a scheduler child takes to stop once asked (it exits then, its locks left to lapse)."""
 _PR_SET_PDEATHSIG = 1
@@ -222,7 +218,8 @@ class RenderWorker(Worker):
         interval_s = self.settings.reconcile_interval_s
         if not self.connection.set(RECONCILE_DUE_KEY, self.name, nx=True, ex=interval_s):
             return {}
-        revived = QueueReconciler(self.connection, self.settings).reconcile()
+        lifecycle = JobLifecycle(self.connection, store_from_settings(self.settings))
+        revived = QueueReconciler(lifecycle, self.settings).reconcile()
         for rq_id, reason in revived.items():
             self.log.warning("Worker %s: re-enqueued stranded %s (%s)", self.name, rq_id, reason)
         return revived
@@ -334,10 +331,8 @@ class RenderWorker(Worker):
         unless the step already did, or the job ended otherwise."""
         if job.func_name not in FINAL_STEP_TASKS:
             return
-        from worker.tasks import fail_job  # the worker process has it loaded (preload_renderer)
-
-        jobs = JobRecords(self.connection, store_from_settings(self.settings), self.settings)
-        fail_job(jobs, job.args[0], f"{job.description}: {reason}")
+        lifecycle = JobLifecycle(self.connection, store_from_settings(self.settings))
+        lifecycle.fail(job.args[0], f"{job.description}: {reason}")
 
     def request_force_stop(self, signum: int, frame: FrameType | None) -> None:
         """Cold shutdown (second SIGTERM/SIGINT): RQ kills the horse and exits; hand its job back first."""
@@ -362,25 +357,6 @@ class RenderWorker(Worker):
             self.cleanup_execution(job, pipeline=pipeline, execution=execution)
             pipeline.execute()
         self.log.info("Worker %s: handed job %s back to queue %s", self.name, job.id, queue.name)
-
-
-def remove_horse_temp_dirs(horse_pid: int) -> None:
-    """Delete the temporary folders of the (ended) work horse ``horse_pid``: a horse killed mid-chunk
-    (SIGKILL, out of memory, a cancel) cannot run its own clean-up."""
-    if horse_pid <= 0:
-        return
-    for path in Path(tempfile.gettempdir()).glob(HORSE_TEMP_PREFIX.format(pid=horse_pid) + "*"):
-        shutil.rmtree(path, ignore_errors=True)
-
-
-def remove_dead_horse_temp_dirs() -> None:
-    """Delete the temporary folders of every work horse on this host that no longer runs (one killed
-    together with its worker, which could not clean up after it)."""
-    pattern = re.compile(re.escape(HORSE_TEMP_PREFIX).replace(r"\{pid\}", r"(\d+)"))
-    for path in Path(tempfile.gettempdir()).glob(HORSE_TEMP_PREFIX.format(pid="*") + "*"):
-        match = pattern.match(path.name)
-        if match and not Path(f"/proc/{match.group(1)}").exists():
-            shutil.rmtree(path, ignore_errors=True)
 
 
 def worker_name() -> str:
@@ -413,6 +389,8 @@ def wait_for_redis(client: redis.Redis, max_backoff_s: float = 5.0) -> None:
 
 
 def build_worker(settings: Settings, client: redis.Redis, name: str | None = None) -> RenderWorker:
+    """A worker of the ``high``, ``default`` and ``low`` queues whose horses run with ``settings``."""
+    bind_settings(settings)
     queues = [RenderQueue(queue_name, connection=client) for queue_name in QUEUE_NAMES]
     worker = RenderWorker(
         queues,

@@ -1,9 +1,11 @@
-"""Every Redis key of the job domain, all under ``hgrender:``:
+"""Every Redis key of the job domain, all under ``hgrender:``. ``hgcore.jobs.lifecycle`` owns them: no
+other module reads or writes a job's keys (``tests/test_job_lifecycle.py`` checks it).
 
-``job:<id>``            hash: the record (owner, status, priority, spp, seed, chunks, timestamps, error)
+``job:<id>``            hash: the job record (``record.JobRecord``: owner, status, priority, spp, seed,
+                        chunks, timestamps, error)
 ``job:<id>:scene``      string: the validated scene document (JSON)
-``job:<id>:chunks``     hash: ``<i>.<field>`` per chunk (status, progress, worker, attempts, samples, ...)
-                        and ``merge.<field>``, written by the workers
+``job:<id>:chunks``     hash: the steps' bookkeeping (``record.StepRecord``): ``<i>.<field>`` per chunk
+                        (status, progress, worker, attempts, samples, ...) and ``merge.<field>``
 ``jobs`` / ``jobs:owner:<o>``  sorted sets of ids by creation time (listing, pagination)
 ``jobs:by_state``       hash: number of jobs in each status (metrics), kept by the transition script
 ``idempotency:<o>:<k>`` string: the job id an idempotency key of owner ``o`` names
@@ -26,7 +28,7 @@ def job_key(job_id: str) -> str:
     return f"hgrender:job:{job_id}"
 
 
-def chunks_key(job_id: str) -> str:
+def steps_key(job_id: str) -> str:
     return f"hgrender:job:{job_id}:chunks"
 
 

@@ -1,8 +1,8 @@
 """The RQ job graph of a render job, and the one place that names its tasks, RQ ids and queues.
 
 A job of ``K > 1`` chunks becomes ``K`` RQ chunk jobs (``<id>-chunk-<i>``; the worker renders spp
-partition ``i`` of ``worker.render.api.plan_chunks(spp, K, seed)``, each with its own seed) on the queue its
-priority names, plus one merge job (``<id>-merge``) that depends on all chunks (failures allowed, so the
+partition ``i`` of ``worker.render.chunks.plan_chunks(spp, K, seed)``, each with its own seed) on the queue
+its priority names, plus one merge job (``<id>-merge``) that depends on all chunks (failures allowed, so the
 merge step is also where a failed chunk fails the job). A job of one chunk becomes a single RQ job under the
 merge job's id that renders and merges in one work horse: no partial upload, and one dequeue and fork
 instead of two (half the queue's latency for small jobs). Either way ``<id>-merge`` is the job's final step,
@@ -16,7 +16,9 @@ from typing import Any
 
 import redis
 from rq import Queue, Retry
+from rq.exceptions import NoSuchJobError
 from rq.job import Dependency
+from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
 from hgcore.settings import Settings
@@ -26,8 +28,12 @@ PRIORITY_QUEUES: dict[str, str] = {"high": "high", "normal": "default", "low": "
 CHUNK_TASK = "worker.tasks.render_chunk_task"
 MERGE_TASK = "worker.tasks.merge_task"
 RENDER_JOB_TASK = "worker.tasks.render_job_task"
+EVALUATE_RUN_TASK = "worker.tasks.evaluate_run_task"
+"""Evaluates a regression run after its renders (``hgcore.regression.evaluation``)."""
+TASKS = (CHUNK_TASK, MERGE_TASK, RENDER_JOB_TASK, EVALUATE_RUN_TASK)
+"""Every task a worker runs (``tests/test_layering.py`` imports them with ``service`` absent)."""
 FINAL_STEP_TASKS = frozenset({MERGE_TASK, RENDER_JOB_TASK})
-"""Tasks that end a job: when one fails for good, the job fails (``worker.tasks.fail_job``)."""
+"""Tasks that end a job: when one fails for good, the job fails (``JobLifecycle.fail``)."""
 
 
 def chunk_rq_id(job_id: str, index: int) -> str:
@@ -105,3 +111,20 @@ def enqueue_job_graph(
     merge.save(pipeline=pipe)
     merge.register_dependency(pipeline=pipe)
     pipe.sadd(queue.redis_queues_keys, queue.key)
+
+
+def chunk_failures(client: redis.Redis, job_id: str, chunk_count: int) -> list[str]:
+    """One line per chunk of a multi-chunk job that did not finish: its index and last error (what the
+    merge step fails the job with)."""
+    failures = []
+    for index in range(chunk_count):
+        try:
+            rq_job = RQJob.fetch(chunk_rq_id(job_id, index), connection=client)
+        except NoSuchJobError:
+            failures.append(f"chunk {index}: lost from the queue")
+            continue
+        if rq_job.get_status() != RQJobStatus.FINISHED:
+            result = rq_job.latest_result()
+            reason = (result.exc_string or "").strip().splitlines()[-1:] if result else []
+            failures.append(f"chunk {index}: {reason[0] if reason else rq_job.get_status()}")
+    return failures

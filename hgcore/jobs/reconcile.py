@@ -3,8 +3,8 @@
 A crash between two of RQ's non-atomic steps (a worker SIGKILLed while it moves a job between a queue and a
 registry), or a Redis restarted from a slightly older AOF, can leave a chunk or merge marked queued in no
 queue, or lose it. ``hgrender serve`` reconciles at start and after each Redis restart, and one worker per
-``reconcile_interval_s`` does so periodically (``worker.queue_worker``); both use this class, which only
-needs Redis and the settings (no store, no API).
+``reconcile_interval_s`` does so periodically (``worker.queue_worker``); both use this class, which reads
+the jobs through their ``JobLifecycle`` (no API).
 """
 
 from __future__ import annotations
@@ -17,10 +17,9 @@ from rq.exceptions import NoSuchJobError
 from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
-from hgcore.jobs.keys import JOBS_INDEX, RECONCILE_LOCK, job_key
+from hgcore.jobs.keys import RECONCILE_LOCK
+from hgcore.jobs.lifecycle import JobLifecycle
 from hgcore.jobs.queue_graph import PRIORITY_QUEUES, enqueue_job_graph, merge_rq_id, rq_ids
-from hgcore.jobs.records import decode_hash
-from hgcore.jobs.status import JobStatus
 from hgcore.settings import Settings
 
 _RQ_ENDED = frozenset({RQJobStatus.FINISHED, RQJobStatus.FAILED, RQJobStatus.STOPPED, RQJobStatus.CANCELED})
@@ -29,10 +28,11 @@ _RQ_ENDED = frozenset({RQJobStatus.FINISHED, RQJobStatus.FAILED, RQJobStatus.STO
 class QueueReconciler:
     """Compares the unfinished jobs' RQ steps with RQ's queues and registries, and re-enqueues the lost."""
 
-    def __init__(self, client: redis.Redis, settings: Settings) -> None:
-        self.client = client
+    def __init__(self, lifecycle: JobLifecycle, settings: Settings) -> None:
+        self.lifecycle = lifecycle
+        self.client: redis.Redis = lifecycle.client
         self.settings = settings
-        self._queues = {name: Queue(name, connection=client) for name in PRIORITY_QUEUES.values()}
+        self._queues = {name: Queue(name, connection=self.client) for name in PRIORITY_QUEUES.values()}
 
     def stranded_rq_jobs(self) -> dict[str, str]:
         """RQ jobs of unfinished hgrender jobs that nothing will ever run: ``{rq id: reason}``.
@@ -50,9 +50,11 @@ class QueueReconciler:
             live |= set(queue.started_job_registry.get_job_ids(cleanup=False))
             live |= set(queue.scheduled_job_registry.get_job_ids(cleanup=False))
         stranded: dict[str, str] = {}
-        for job_id in self._unfinished_job_ids():
-            chunk_count = int(self.client.hget(job_key(job_id), "chunks") or 0)
-            ids = rq_ids(job_id, chunk_count)
+        for job_id in self.lifecycle.unfinished_job_ids():
+            record = self.lifecycle.record(job_id)
+            if record is None:  # deleted meanwhile
+                continue
+            ids = rq_ids(job_id, record.chunk_count)
             fetched = RQJob.fetch_many(ids, connection=self.client)
             statuses = {
                 rq_id: job.get_status(refresh=False) if job else None
@@ -67,15 +69,6 @@ class QueueReconciler:
                 elif status not in _RQ_ENDED and rq_id not in live:
                     stranded[rq_id] = f"{status.value} but in no queue or registry"
         return stranded
-
-    def _unfinished_job_ids(self) -> list[str]:
-        ids = [i.decode() for i in self.client.zrange(JOBS_INDEX, 0, -1)]
-        with self.client.pipeline(transaction=False) as pipe:
-            for job_id in ids:
-                pipe.hget(job_key(job_id), "status")
-            statuses = pipe.execute()
-        unfinished = {JobStatus.QUEUED.value.encode(), JobStatus.RUNNING.value.encode()}
-        return [i for i, status in zip(ids, statuses, strict=True) if status in unfinished]
 
     def reconcile(self, confirm_after_s: float = 2.0) -> dict[str, str]:
         """Re-enqueue the stranded RQ jobs of unfinished jobs (``stranded_rq_jobs``), at the front of their
@@ -99,12 +92,14 @@ class QueueReconciler:
     def _revive(self, rq_id: str) -> None:
         """Put one stranded RQ job (``<id>-chunk-<i>`` or ``<id>-merge``) at the front of its queue."""
         job_id = rq_id.split("-", 1)[0]
-        record = decode_hash(self.client.hgetall(job_key(job_id)))
-        queue = self._queues[PRIORITY_QUEUES[record["priority"]]]
+        record = self.lifecycle.record(job_id)
+        if record is None:  # deleted since it was found stranded
+            return
+        queue = self._queues[PRIORITY_QUEUES[record.priority]]
         try:
             rq_job = RQJob.fetch(rq_id, connection=self.client)
         except NoSuchJobError:
-            self._recreate(job_id, int(record["chunks"]), rq_id, queue.name)
+            self._recreate(job_id, record.chunk_count, rq_id, queue.name)
             return
         # RQ's own enqueue step, without its dependency check: the merge's chunks were seen ended (and
         # its check reads RQ's dependency bookkeeping, which may be what was lost).

@@ -1,5 +1,5 @@
 """Job statuses and the state machine: ``queued → running → succeeded | failed``; ``queued | running →
-canceled``; a final status never changes (``records.JobRecords.transition`` applies this atomically)."""
+canceled``; a final status never changes (``lifecycle.JobLifecycle.transition`` applies this atomically)."""
 
 from __future__ import annotations
 
@@ -30,8 +30,8 @@ ALLOWED_FROM: dict[JobStatus, tuple[JobStatus, ...]] = {
 Priority = Literal["high", "normal", "low"]
 """A job's queue priority."""
 
-ChunkStatus = Literal["queued", "running", "done", "failed", "canceled"]
-"""Status of one chunk (or of the merge step) in the job's chunk bookkeeping."""
+StepStatus = Literal["queued", "running", "done", "failed", "canceled"]
+"""Status of one step of a job (a chunk, or the merge) in its steps' bookkeeping (``record.StepRecord``)."""
 
 MERGE_PENDING_PROGRESS = 0.999
 """An unfinished job's progress stops here: with every sample rendered its merge step is still to come

@@ -1,24 +1,20 @@
 """The view of a job: what ``GET /v1/jobs/{id}`` answers and what ``manifest.json`` keeps when the job ends
-(so a finished job's view outlives its Redis record). ``build_view`` aggregates a record and its chunk
-bookkeeping (``keys.job_key`` / ``keys.chunks_key``) into it: progress is the mean chunk fraction."""
+(so a finished job's view outlives its Redis record). ``build_view`` aggregates a job record and its steps
+(``record.JobRecord``, ``record.JobSteps``) into it: progress is the mean chunk fraction."""
 
 from __future__ import annotations
 
-import json
 import time
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from hgcore.jobs.status import MERGE_PENDING_PROGRESS, ChunkStatus, JobStatus, Priority
-
-
-def _float_or_none(value: str | None) -> float | None:
-    return float(value) if value not in (None, "") else None
+from hgcore.jobs.record import JobRecord, JobSteps
+from hgcore.jobs.status import MERGE_PENDING_PROGRESS, JobStatus, Priority, StepStatus
 
 
 class ChunkView(BaseModel):
     index: int
-    status: ChunkStatus
+    status: StepStatus
     progress: float = Field(ge=0.0, le=1.0)
     spp: int | None = None
     worker: str | None = None
@@ -53,17 +49,16 @@ class NoiseTargetView(BaseModel):
     rounds: list[dict[str, float]] | None = Field(None, description="Each round's total spp, s, error.")
 
 
-def _noise_target_view(record: dict[str, str]) -> NoiseTargetView | None:
-    """The record's requested target (``hgcore.noise_target.RECORD_FIELDS``) plus the achieved block
-    (JSON in ``noise_target``) once the job wrote it."""
+def _noise_target_view(record: JobRecord) -> NoiseTargetView | None:
+    """The record's requested target plus, once the job wrote it, the block of its rounds."""
     requested = {
-        name: _float_or_none(record.get(name))
-        for name in ("target_rel_error", "time_budget_s", "target_quantile")
+        "target_rel_error": record.target_rel_error,
+        "time_budget_s": record.time_budget_s,
+        "target_quantile": record.target_quantile,
     }
     if all(value is None for value in requested.values()):
         return None
-    achieved = json.loads(record["noise_target"]) if record.get("noise_target") else {}
-    return NoiseTargetView(**(achieved | requested))
+    return NoiseTargetView(**((record.noise_target_outcome or {}) | requested))
 
 
 class JobView(BaseModel):
@@ -112,59 +107,58 @@ class JobView(BaseModel):
     )
 
 
-def build_view(record: dict[str, str], chunk_fields: dict[str, str], now: float | None = None) -> JobView:
-    """Aggregate a record and its chunk fields into the API view (progress = mean chunk fraction)."""
+def build_view(record: JobRecord, steps: JobSteps, now: float | None = None) -> JobView:
+    """Aggregate a record and its steps into the API view (progress = mean chunk fraction)."""
     now = time.time() if now is None else now
-    chunk_count = int(record["chunks"])
-    status = JobStatus(record["status"])
     chunks = [
         ChunkView(
             index=i,
-            status=chunk_fields.get(f"{i}.status", "queued"),  # type: ignore[arg-type]
-            progress=float(chunk_fields.get(f"{i}.progress", "0") or 0),
-            spp=int(chunk_fields[f"{i}.spp"]) if chunk_fields.get(f"{i}.spp") else None,
-            worker=chunk_fields.get(f"{i}.worker") or None,
-            attempts=int(chunk_fields.get(f"{i}.attempts", "0")),
-            samples=int(chunk_fields[f"{i}.samples"]) if chunk_fields.get(f"{i}.samples") else None,
-            seconds=_float_or_none(chunk_fields.get(f"{i}.seconds")),
+            status=step.status,
+            progress=step.progress,
+            spp=step.spp,
+            worker=step.worker,
+            attempts=step.attempts,
+            samples=step.samples,
+            seconds=step.seconds,
         )
-        for i in range(chunk_count)
+        for i, step in enumerate(steps.chunks)
     ]
+    chunk_count = record.chunk_count
     chunks_done = sum(1 for c in chunks if c.status == "done")
+    status = record.status
     progress = 1.0 if status == JobStatus.SUCCEEDED else sum(c.progress for c in chunks) / max(1, chunk_count)
     if status != JobStatus.SUCCEEDED:
         progress = min(progress, MERGE_PENDING_PROGRESS)
-    created_at = float(record["created_at"])
-    started_at = _float_or_none(record.get("started_at"))
-    finished_at = _float_or_none(record.get("finished_at"))
+    created_at, started_at, finished_at = record.created_at, record.started_at, record.finished_at
     eta_s = None
     if status == JobStatus.RUNNING and started_at is not None and progress > 0:
         eta_s = max(0.0, (now - started_at) * (1.0 - progress) / progress)
     render_seconds = [c.seconds for c in chunks if c.seconds is not None]
-    workers = sorted({c.worker for c in chunks if c.worker} | {chunk_fields.get("merge.worker") or ""} - {""})
+    merge_worker = steps.merge.worker if steps.merge is not None else None
+    workers = sorted({c.worker for c in chunks if c.worker} | ({merge_worker} if merge_worker else set()))
     return JobView(
-        id=record["id"],
-        owner=record["owner"],
-        name=record.get("name") or None,
+        id=record.id,
+        owner=record.owner,
+        name=record.name,
         status=status,
         progress=progress,
         eta_s=eta_s,
-        priority=record["priority"],  # type: ignore[arg-type]
-        spp=int(record["spp"]),
-        width=int(record["width"]) if record.get("width") else None,
-        height=int(record["height"]) if record.get("height") else None,
-        seed=int(record["seed"]),
+        priority=record.priority,
+        spp=record.spp,
+        width=record.width,
+        height=record.height,
+        seed=record.seed,
         chunks_total=chunk_count,
         chunks_done=chunks_done,
         workers=workers,
-        error=record.get("error") or None,
+        error=record.error,
         timings=JobTimings(
             created_at=created_at,
             started_at=started_at,
             finished_at=finished_at,
             queue_wait_s=started_at - created_at if started_at is not None else None,
             render_s=sum(render_seconds) if render_seconds else None,
-            merge_s=_float_or_none(chunk_fields.get("merge.seconds")),
+            merge_s=steps.merge.seconds if steps.merge is not None else None,
             total_s=finished_at - created_at if finished_at is not None else None,
         ),
         noise_target=_noise_target_view(record),

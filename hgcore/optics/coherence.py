@@ -89,11 +89,6 @@ def shape_matrix_from_covariance(sigma_m2: Any) -> np.ndarray:
     return np.linalg.inv(require_positive_definite(symmetric_2x2(sigma_m2, "sigma_m2"), "sigma_m2"))
 
 
-def covariance_from_shape_matrix(theta_per_m2: Any) -> np.ndarray:
-    """Σ⊥ = Θ⁻¹ (m²) for a positive-definite shape matrix Θ (1/m²)."""
-    return np.linalg.inv(require_positive_definite(symmetric_2x2(theta_per_m2, "theta"), "theta"))
-
-
 def shape_matrix_from_log_hessian(hessian: Any, epsilon: float = 1e-300) -> np.ndarray:
     """Lemma 4.4 with its sign: Θ = −[∂²_ζ ln f̃|₀]⁻¹, repaired to be positive-definite (§4.1).
 

@@ -2,9 +2,9 @@
 regression scheduler as its own process).
 
 ``regress`` runs a suite file (JSON, or YAML for ``.yaml``/``.yml``; the format of
-``service.regression.models.Suite``, see docs/regression.md) in one of two modes:
+``hgcore.regression.models.Suite``, see docs/regression.md) in one of two modes:
 
-* locally (default, no service needed): renders every scene with ``worker.render.api.render_scene`` and
+* locally (default, no service needed): renders every scene with ``worker.render.chunks.render_scene`` and
   compares it with its baseline in ``--baseline DIR`` (``DIR/<scene>/image.exr``, ``variance.exr``,
   ``summary.json``) using the service's noise-aware metrics; ``--update-baseline`` then stores the new renders
   as the baselines;
@@ -59,10 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def load_suite(path: Path) -> Any:
-    """The suite file parsed and validated (``service.regression.models.Suite``)."""
+    """The suite file parsed and validated (``hgcore.regression.models.Suite``)."""
     from pydantic import ValidationError
 
-    from service.regression.models import Suite
+    from hgcore.regression.models import Suite
 
     if not path.is_file():
         raise CliError(f"suite: {path} is not a file")
@@ -86,7 +86,7 @@ def load_suite(path: Path) -> Any:
 
 
 def _copy_outputs(source: Path, destination: Path) -> None:
-    from service.regression.store import BASELINE_FILES
+    from hgcore.regression.store import BASELINE_FILES
 
     destination.mkdir(parents=True, exist_ok=True)
     for name in BASELINE_FILES:
@@ -99,17 +99,22 @@ def run_suite(
     suite: Any, baseline_dir: Path, work_dir: Path, seed: int, update_baseline: bool
 ) -> list[dict[str, Any]]:
     """Render, compare and (optionally) update the baselines; one result dict per scene."""
-    from service.regression.images import load_render_outputs
-    from service.regression.metrics import compare_renders
+    from hgcore.regression.images import load_render_outputs
+    from hgcore.regression.metrics import compare_renders
+    from hgcore.settings import Settings
     from service.regression.runs import resolve_scene
-    from worker.render.api import render_scene
+    from worker.mitsuba_setup import configure_mitsuba
+
+    settings = Settings()
+    configure_mitsuba(settings.variant, settings.render_threads)
+    from worker.render.chunks import render_scene
 
     results = []
     for entry in suite.scenes:
         current_dir = work_dir / entry.key
         result: dict[str, Any] = {"scene": entry.key, "verdict": "error", "reasons": [], "metrics": {}}
         try:
-            render_scene(resolve_scene(entry, seed), current_dir)
+            render_scene(resolve_scene(entry, seed, limits=settings), current_dir)
             baseline = baseline_dir / entry.key
             if (baseline / IMAGE_EXR).is_file():
                 comparison = compare_renders(

@@ -18,7 +18,7 @@ from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.connection import ServiceTarget, add_client_options
 from hgrender.cli.progress import ProgressDisplay
 from hgrender.cli.render import add_quality_options
-from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TEV_DEFAULT, TevImage, tev_address
+from hgrender.cli.tev import TevImage, add_tev_option
 from hgrender.client import ApiError
 
 FILM_OVERRIDES: tuple[str, ...] = ("width", "height", "bands")
@@ -80,15 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "view", parents=[client_options], help="stream a job's image into tev, or print its viewer URL"
     )
     view.add_argument("job_id")
-    view.add_argument(
-        "--tev",
-        nargs="?",
-        const=DEFAULT_TEV_ADDRESS,
-        default=None,
-        type=tev_address,
-        metavar="HOST:PORT",
-        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated as chunks finish",
-    )
+    add_tev_option(view, "as chunks finish")
     view.set_defaults(handler=view_command)
 
     token = subparsers.add_parser("token", help="manage API tokens")

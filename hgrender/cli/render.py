@@ -9,7 +9,7 @@ from typing import Any
 
 from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.progress import ProgressDisplay
-from hgrender.cli.tev import DEFAULT_TEV_ADDRESS, TEV_DEFAULT, TevImage, tev_address
+from hgrender.cli.tev import TevImage, add_tev_option
 
 # With --tev and no --chunks, the render is split into this many chunks (at most spp) so that tev shows
 # the image refine as each chunk is added.
@@ -37,15 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("auto", "llvm_ad_spectral", "cuda_ad_spectral"),
         help="Mitsuba variant (default: HGRENDER_VARIANT or auto)",
     )
-    parser.add_argument(
-        "--tev",
-        nargs="?",
-        const=DEFAULT_TEV_ADDRESS,
-        default=None,
-        type=tev_address,
-        metavar="HOST:PORT",
-        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated after every chunk",
-    )
+    add_tev_option(parser, "after every chunk")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=run)
 
@@ -97,16 +89,18 @@ def load_scene_file(path: Path) -> tuple[dict, Path | None]:
 
 def run(args: argparse.Namespace) -> int:
     import contextlib
-    import os
 
-    if args.variant:
-        os.environ["HGRENDER_VARIANT"] = args.variant
+    from hgcore.settings import Settings
+    from worker.mitsuba_setup import configure_mitsuba
+
+    settings = Settings()  # this process's one: scene limits, Mitsuba variant and thread count
     scene, bundle_dir = load_scene_file(args.scene)
+    configure_mitsuba(args.variant or settings.variant, settings.render_threads)
     from hgcore.noise_target import NoiseTarget
     from schemas.validation import validate_scene
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
-    parsed = validate_scene(scene)
+    parsed = validate_scene(scene, settings)
     target = NoiseTarget.from_options(args.target_rel_error, args.time_budget_s, args.target_quantile)
     chunks = args.chunks if args.chunks is not None else (TEV_DEFAULT_CHUNKS if args.tev else 1)
     with contextlib.ExitStack() as stack:

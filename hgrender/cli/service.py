@@ -196,12 +196,15 @@ class RedisSupervisor:
 
 def reconcile(settings: Any, confirm_after_s: float = 2.0) -> None:
     """Re-enqueue whatever the queue state lost track of (``hgcore.jobs.reconcile``), logging each."""
+    from hgcore.jobs.lifecycle import JobLifecycle
     from hgcore.jobs.reconcile import QueueReconciler
     from hgcore.redis_clients import redis_client
+    from hgcore.store import store_from_settings
 
     client = redis_client(settings.redis_url)
     try:
-        revived = QueueReconciler(client, settings).reconcile(confirm_after_s)
+        lifecycle = JobLifecycle(client, store_from_settings(settings))
+        revived = QueueReconciler(lifecycle, settings).reconcile(confirm_after_s)
     except Exception as error:  # Redis gone again: the next restart reconciles
         log.error("reconciliation failed: %s", error)
         return
@@ -323,8 +326,8 @@ def _print_where(host: str, port: int, settings: Any, token_file: Path | None) -
 
 def worker_command(args: argparse.Namespace) -> int:
     from hgcore.settings import Settings
+    from worker.preload import preload_renderer
     from worker.queue_worker import run_worker
-    from worker.tasks import preload_renderer
 
     if args.exit_with is not None:
         from worker.queue_worker import die_with_parent
@@ -332,5 +335,5 @@ def worker_command(args: argparse.Namespace) -> int:
         if not die_with_parent(signal.SIGTERM, args.exit_with):
             raise CliError(f"exit-with: process {args.exit_with} is not this worker's parent (any more)")
     settings = Settings()
-    preload_renderer()  # forked work horses inherit the imported renderer
+    preload_renderer(settings)  # forked work horses inherit the imported renderer
     return run_worker(settings, burst=args.burst, name=args.name)

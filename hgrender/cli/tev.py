@@ -40,6 +40,19 @@ def tev_address(text: str) -> tuple[str, int]:
     return host, port
 
 
+def add_tev_option(parser: argparse.ArgumentParser, updated: str) -> None:
+    """``--tev [HOST:PORT]`` (``render`` and ``view``); ``updated`` says when tev's image is updated."""
+    parser.add_argument(
+        "--tev",
+        nargs="?",
+        const=DEFAULT_TEV_ADDRESS,
+        default=None,
+        type=tev_address,
+        metavar="HOST:PORT",
+        help=f"stream into a running tev (default address {TEV_DEFAULT}), updated {updated}",
+    )
+
+
 def channel_order(names: list[str]) -> list[str]:
     """``image.exr``'s channel order for tev: R, G, B first, then the bands by wavelength, then the rest
     grouped by layer."""

@@ -11,15 +11,21 @@ from collections.abc import Callable
 from typing import Annotated
 
 import redis
-from fastapi import Depends, Request
+import redis.asyncio as aioredis
+from fastapi import Depends, Path, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from hgcore.jobs.records import JobNotFoundError
+from hgcore.jobs.lifecycle import JobNotFoundError
 from hgcore.jobs.views import JobView
 from hgcore.settings import Settings
 from hgcore.store.base import ArtifactStore
 from service.auth import LOCAL_DEVELOPER, AuthenticationError, Principal, RequestAuthenticator, TokenRegistry
 from service.jobs import JobService
+from service.metrics import LatencyHistogram
+from service.viewer_images import ViewerImages
+
+JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="Job id (32 hex digits).")]
+"""The ``{job_id}`` path parameter of every route of one job."""
 
 _bearer = HTTPBearer(
     auto_error=False, description="API token (`hgrender token create`; `<data dir>/admin.token`)."
@@ -39,8 +45,20 @@ async def get_store(request: Request) -> ArtifactStore:
     return request.app.state.store
 
 
+async def get_async_redis(request: Request) -> aioredis.Redis:
+    return request.app.state.aredis
+
+
 async def get_jobs(request: Request) -> JobService:
     return request.app.state.jobs
+
+
+async def get_viewer_images(request: Request) -> ViewerImages:
+    return request.app.state.viewer_images
+
+
+async def get_latency(request: Request) -> LatencyHistogram:
+    return request.app.state.latency
 
 
 async def get_tokens(request: Request) -> TokenRegistry:
@@ -50,8 +68,11 @@ async def get_tokens(request: Request) -> TokenRegistry:
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 RedisDep = Annotated[redis.Redis, Depends(get_redis)]
 StoreDep = Annotated[ArtifactStore, Depends(get_store)]
+AsyncRedisDep = Annotated[aioredis.Redis, Depends(get_async_redis)]
 JobsDep = Annotated[JobService, Depends(get_jobs)]
 TokensDep = Annotated[TokenRegistry, Depends(get_tokens)]
+LatencyDep = Annotated[LatencyHistogram, Depends(get_latency)]
+ViewerImagesDep = Annotated[ViewerImages, Depends(get_viewer_images)]
 
 
 async def current_principal(

@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from starlette.requests import ClientDisconnect
 
 from hgcore.errors import InputError
-from hgcore.jobs.records import JobNotFoundError
+from hgcore.jobs.lifecycle import JobNotFoundError
 from hgcore.store.base import ArtifactNotFoundError, validate_key
 from schemas import SceneError
 from service.auth import AuthenticationError, PermissionDeniedError, RateLimitedError

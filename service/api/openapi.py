@@ -14,10 +14,12 @@ the exception handlers (``service.api.errors``) actually send:
 
 from __future__ import annotations
 
+from http import HTTPStatus
 from typing import Any
 
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
+from pydantic import BaseModel
 
 from service.models import Problem
 
@@ -37,6 +39,41 @@ PROBLEM_REF = {"$ref": "#/components/schemas/Problem"}
 RETRY_AFTER_HEADER = {
     "Retry-After": {"description": "Seconds to wait before retrying.", "schema": {"type": "integer"}}
 }
+
+
+def problems(**descriptions: str) -> dict[int | str, dict[str, Any]]:
+    """Route-level error answers with the ``Problem`` body: ``problems(not_found="No such job.")`` →
+    {404: ...}; the names are ``HTTPStatus`` members in lower case (``conflict``, ``not_found``, ...)."""
+    return {
+        HTTPStatus[name.upper()].value: {"model": Problem, "description": description}
+        for name, description in descriptions.items()
+    }
+
+
+AUTH_ERRORS = problems(unauthorized="Missing or invalid token.", forbidden="Token lacks the scope.")
+"""What every route behind a bearer token may answer (``document_common_responses`` completes them)."""
+JOB_ERRORS = AUTH_ERRORS | problems(
+    not_found="No such job (or another owner's).", too_many_requests="Rate limit exceeded."
+)
+"""What every route of one job (``/v1/jobs/{job_id}...``) may answer."""
+
+
+def request_body(content: dict[str, Any]) -> dict[str, Any]:
+    """``openapi_extra`` of a route that reads its body itself (FastAPI then documents none): a required
+    body of the media types in ``content`` (media type → schema, example)."""
+    return {"requestBody": {"required": True, "content": content}}
+
+
+def form_fields_schema(model: type[BaseModel], **files: dict[str, Any]) -> dict[str, Any]:
+    """The multipart form of ``model``'s fields (text in the form, validated as ``model``: its JSON
+    schema without the ``null`` of optional fields) plus the file fields ``files`` (name → schema), which
+    are required."""
+    properties: dict[str, Any] = {}
+    for name, schema in model.model_json_schema()["properties"].items():
+        (value,) = [variant for variant in schema.get("anyOf", [schema]) if variant.get("type") != "null"]
+        kept = {key: schema[key] for key in ("description",) if key in schema}
+        properties[name] = {key: v for key, v in value.items() if key not in ("title", "default")} | kept
+    return {"type": "object", "required": list(files), "properties": files | properties}
 
 
 def _problem_response(description: str, status: str) -> dict[str, Any]:

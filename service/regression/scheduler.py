@@ -5,7 +5,7 @@
   APScheduler's ``BackgroundScheduler``; the others wait and take over at most ``regression_leader_ttl_s``
   after the leader dies. A leader whose renewal fails (it was paused past the lease) stops its scheduler at
   once; in the moment both may run, the due-time claims below keep every run unique.
-* Schedules (``service.regression.store``) are the source of truth; the leader mirrors them into APScheduler
+* Schedules (``hgcore.regression.store``) are the source of truth; the leader mirrors them into APScheduler
   jobs (cron: ``CronTrigger.from_crontab`` in the schedule's time zone; interval: ``IntervalTrigger`` anchored
   at the schedule's creation time, so every process computes the same due times). Next run times persist in
   the ``RedisJobStore``, so a new leader resumes where the old one stopped.
@@ -44,10 +44,10 @@ from redis.connection import parse_url
 
 from hgcore.errors import InputError
 from hgcore.redis_clients import redis_client
+from hgcore.regression.models import ScheduleView
+from hgcore.regression.store import RegressionStore
 from hgcore.settings import Settings
-from service.regression.models import ScheduleView
 from service.regression.runs import RunService, run_service_for
-from service.regression.store import RegressionStore
 
 LEADER_KEY = "hgrender:regression:scheduler:leader"
 JOBS_KEY = "hgrender:regression:apscheduler:jobs"

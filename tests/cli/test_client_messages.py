@@ -16,8 +16,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.cli.conftest import Served
-from tests.service.conftest import tiny_scene
+from tests.support.live_service import LiveService
+from tests.support.scenes import tiny_scene
 
 pytestmark = pytest.mark.slow
 
@@ -90,55 +90,59 @@ def test_default_url_and_an_unknown_host_are_named(tmp_path: Path) -> None:
     ]
 
 
-def test_wrong_path_says_no_hgrender_api_there(served: Served) -> None:
-    url = served.base_url + "/api"
-    result = run("list", "--url", url, "--token", served.token)
+def test_wrong_path_says_no_hgrender_api_there(live_service: LiveService) -> None:
+    url = live_service.base_url + "/api"
+    result = run("list", "--url", url, "--token", live_service.token)
     assert error_lines(result) == [
         f"hgrender list: error: url: no hgrender API at {url} (URL from --url): HTTP 404 for GET "
         "/api/v1/jobs; set the service's base URL, e.g. http://127.0.0.1:8000, with --url or HGRENDER_URL"
     ]
 
 
-def test_bad_and_missing_tokens_say_where_the_cli_looked(served: Served, tmp_path: Path) -> None:
+def test_bad_and_missing_tokens_say_where_the_cli_looked(live_service: LiveService, tmp_path: Path) -> None:
     hint = (
         "pass a valid token with --token or HGRENDER_TOKEN, or --data-dir DIR of the `hgrender serve` that "
         "wrote DIR/admin.token (`hgrender token create` makes more)"
     )
-    result = run("list", "--data-dir", str(tmp_path), HGRENDER_URL=served.base_url, HGRENDER_TOKEN="nope")
+    result = run(
+        "list", "--data-dir", str(tmp_path), HGRENDER_URL=live_service.base_url, HGRENDER_TOKEN="nope"
+    )
     assert error_lines(result) == [
         "hgrender list: error: authorization: malformed bearer token (HTTP 401; token from HGRENDER_TOKEN); "
         + hint
     ]
     wrong = "hgr_" + "0" * 40
-    result = run("status", JOB_ID, "--url", served.base_url, "--token", wrong, "--data-dir", str(tmp_path))
+    result = run(
+        "status", JOB_ID, "--url", live_service.base_url, "--token", wrong, "--data-dir", str(tmp_path)
+    )
     assert error_lines(result)[0].startswith("hgrender status: error: authorization: ")
     assert error_lines(result)[0].endswith(f"(HTTP 401; token from --token); {hint}")
-    result = run("list", "--url", served.base_url, "--data-dir", str(tmp_path))
+    result = run("list", "--url", live_service.base_url, "--data-dir", str(tmp_path))
     assert error_lines(result) == [
         "hgrender list: error: authorization: missing bearer token (HTTP 401; token from nowhere: no "
         f"--token, HGRENDER_TOKEN unset, no {tmp_path}/admin.token); {hint}"
     ]
     # The serve's own data dir: its admin.token is found and used.
-    result = run("list", "--url", served.base_url, "--data-dir", str(served.data_dir))
+    result = run("list", "--url", live_service.base_url, "--data-dir", str(live_service.data_dir))
     assert result.returncode == 0, result.stderr
 
 
-def test_submit_lists_every_validation_problem(served: Served, tmp_path: Path) -> None:
+def test_submit_lists_every_validation_problem(live_service: LiveService, tmp_path: Path) -> None:
     scene = tiny_scene()
     scene["film"].update(bands=0, width=-4)
     scene["camera"]["fov_deg"] = "wide"
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(scene))
     api = httpx.post(
-        served.base_url + "/v1/jobs",
+        live_service.base_url + "/v1/jobs",
         json={"scene": scene},
-        headers={"Authorization": f"Bearer {served.token}"},
+        headers={"Authorization": f"Bearer {live_service.token}"},
         timeout=30,
     )
     assert api.status_code == 422
     problems = api.json()["errors"]
     assert len(problems) >= 3
-    result = run("submit", str(path), "--url", served.base_url, "--token", served.token)
+    result = run("submit", str(path), "--url", live_service.base_url, "--token", live_service.token)
     assert error_lines(result) == [
         f"hgrender submit: error: HTTP 422: {len(problems)} problems in {path}:",
         *(f"  {p['pointer'] or '/'}: {p['message']}" for p in problems),
@@ -177,14 +181,15 @@ def test_submit_options_are_validated(tmp_path: Path) -> None:
 
 
 def test_submit_wait_with_film_overrides_writes_one_progress_line_per_step(
-    served: Served, tmp_path: Path
+    live_service: LiveService, tmp_path: Path
 ) -> None:
+    live_service.ensure_worker()
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(tiny_scene(size_px=16)))
     result = run(
         "submit", str(path), "--wait", "--width", "10", "--height", "6", "--bands", "3", "--spp", "2",
         "--chunks", "2", "--name", "cli override",
-        HGRENDER_URL=served.base_url, HGRENDER_TOKEN=served.token,
+        HGRENDER_URL=live_service.base_url, HGRENDER_TOKEN=live_service.token,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     job_id = result.stdout.splitlines()[0]
@@ -195,10 +200,10 @@ def test_submit_wait_with_film_overrides_writes_one_progress_line_per_step(
     assert all(line.startswith(f"job {job_id}: ") for line in lines)
     assert len(lines) == len(set(lines))  # one line per step, no repeats
     assert any("running" in line for line in lines)
-    summary = served.client.download(job_id, "summary.json", tmp_path / "summary.json")
+    summary = live_service.admin.download(job_id, "summary.json", tmp_path / "summary.json")
     summary = json.loads(summary.read_text())
     assert (summary["width"], summary["height"], summary["bands"], summary["spp"]) == (10, 6, 3, 2)
-    listed = run("list", "--url", served.base_url, "--token", served.token)
+    listed = run("list", "--url", live_service.base_url, "--token", live_service.token)
     assert any(
         line.startswith(job_id) and line.endswith("cli override") for line in listed.stdout.splitlines()
     )
@@ -234,19 +239,22 @@ def test_another_web_server_is_not_taken_for_the_api(tmp_path: Path) -> None:
     ]
 
 
-def test_submit_passes_the_integrator_and_noise_target_options(served: Served, tmp_path: Path) -> None:
+def test_submit_passes_the_integrator_and_noise_target_options(
+    live_service: LiveService, tmp_path: Path
+) -> None:
+    live_service.ensure_worker()
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(tiny_scene(size_px=8, spp=2)))
     result = run(
         "submit", str(path), "--wait", "--integrator", "rlt", "--target-rel-error", "0.2",
-        "--time-budget-s", "60", HGRENDER_URL=served.base_url, HGRENDER_TOKEN=served.token,
+        "--time-budget-s", "60", HGRENDER_URL=live_service.base_url, HGRENDER_TOKEN=live_service.token,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     job_id = result.stdout.splitlines()[0]
-    view = served.client.get(job_id)
+    view = live_service.admin.get(job_id)
     assert view["noise_target"]["target_rel_error"] == 0.2
     assert view["noise_target"]["time_budget_s"] == 60
-    summary = json.loads(served.client.download(job_id, "summary.json", tmp_path / "s.json").read_text())
+    summary = json.loads(live_service.admin.download(job_id, "summary.json", tmp_path / "s.json").read_text())
     assert summary["integrator"] == "rlt"
     assert summary["noise_target"]["met"] is True
     assert summary["noise_target"]["achieved_rel_error"] <= 0.2

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
-from tests.cli.conftest import Served
-from tests.cli.tev_listener import TevListener
+from tests.support.live_service import LiveService
+from tests.support.scenes import example, tiny_scene
+from tests.support.tev_listener import TevListener
 
 HGRENDER = Path(sys.executable).parent / "hgrender"
-EXAMPLE = Path(__file__).parents[2] / "schemas" / "examples" / "cornell_box.json"
 
 
 def run(*args: str, timeout_s: float = 600) -> subprocess.CompletedProcess[str]:
@@ -45,8 +45,8 @@ def closed_port() -> int:
 
 
 def small_scene(tmp_path: Path, size_px: int = 12) -> Path:
-    scene = json.loads(EXAMPLE.read_text())
-    scene["film"].update(width=size_px, height=size_px, bands=4)
+    """The Cornell box at ``size_px`` square and 4 bands, written to a file for the command line."""
+    scene = example("cornell_box", width=size_px, height=size_px, bands=4)
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(scene))
     return path
@@ -106,15 +106,14 @@ def test_tev_address_is_validated(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_view_streams_a_running_job_then_its_final_image(
-    served: Served, tmp_path: Path, tev: TevListener
+    live_service: LiveService, tmp_path: Path, tev: TevListener
 ) -> None:
-    from tests.service.conftest import tiny_scene
-
     # A long job ahead in the one worker's queue keeps ours queued until `view` follows it; canceling the
     # blocker then lets our four chunks run one by one while `view` watches.
-    blocker = served.client.submit(tiny_scene(size_px=64, spp=65536), chunks=1, name="tev view blocker")
-    job = served.client.submit(tiny_scene(size_px=24, spp=256), chunks=4, name="tev view")
-    common = ["--url", served.base_url, "--token", served.token]
+    live_service.ensure_worker()
+    blocker = live_service.admin.submit(tiny_scene(size_px=64, spp=65536), chunks=1, name="tev view blocker")
+    job = live_service.admin.submit(tiny_scene(size_px=24, spp=256), chunks=4, name="tev view")
+    common = ["--url", live_service.base_url, "--token", live_service.token]
     env = {k: v for k, v in os.environ.items() if not k.startswith("HGRENDER_")}
     command = [str(HGRENDER), "view", job["id"], "--tev", f"127.0.0.1:{tev.port}", *common]
     process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=env)
@@ -122,7 +121,7 @@ def test_view_streams_a_running_job_then_its_final_image(
         assert process.stderr is not None
         first = process.stderr.readline()  # the first progress line: view follows the queued job
         assert first == f"job {job['id']}:   0% (queued, 0/4 chunks)\n", first
-        served.client.cancel(blocker["id"])
+        live_service.admin.cancel(blocker["id"])
         rest = process.stderr.read()
         assert process.wait(timeout=300) == 0, rest
     finally:
@@ -130,7 +129,7 @@ def test_view_streams_a_running_job_then_its_final_image(
             process.kill()
     lines = (first + rest).splitlines()
     assert lines[-1] == f"{job['id']}: sent to tev at 127.0.0.1:{tev.port}"
-    exr = read_exr(served.client.download(job["id"], "image.exr", tmp_path / "image.exr"))
+    exr = read_exr(live_service.admin.download(job["id"], "image.exr", tmp_path / "image.exr"))
     name = f"hgrender {job['id']}"
     image = tev.images[name]
     assert image.channel_names[:3] == ["R", "G", "B"]
@@ -142,7 +141,7 @@ def test_view_streams_a_running_job_then_its_final_image(
     assert not np.allclose(image.snapshots["R"][0], image.snapshots["R"][-1])
     # Without --tev: the browser viewer's address for the job.
     printed = run("view", job["id"], *common)
-    assert printed.stdout.strip() == f"{served.base_url}/#/view/{job['id']}"
+    assert printed.stdout.strip() == f"{live_service.base_url}/#/view/{job['id']}"
 
 
 def test_view_with_no_tev_listening_is_one_line() -> None:

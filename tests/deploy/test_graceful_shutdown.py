@@ -24,16 +24,12 @@ from rq.job import Job as RQJob
 from rq.job import JobStatus as RQJobStatus
 
 from hgcore.jobs.queue_graph import chunk_rq_id
-from hgcore.store import store_from_settings
 from hgrender.client import HgrenderClient
-from service.jobs import JobService
-from tests.service.conftest import LiveService, tiny_scene, wait_for
+from tests.support.live_service import LiveService
+from tests.support.processes import wait_for
+from tests.support.scenes import tiny_scene
 
 pytestmark = pytest.mark.slow
-
-
-def job_service(service: LiveService) -> JobService:
-    return JobService(service.redis, store_from_settings(service.settings), service.settings)
 
 
 def submit_rendering(service: LiveService, spp: int) -> tuple[HgrenderClient, str, int]:
@@ -46,7 +42,7 @@ def submit_rendering(service: LiveService, spp: int) -> tuple[HgrenderClient, st
         60,
         "the chunk to render",
     )
-    return client, job_id, int(job_service(service).chunk_fields(job_id)["0.pid"])
+    return client, job_id, service.steps(job_id).chunks[0].pid
 
 
 def wait_exit(process: subprocess.Popen[bytes], timeout_s: float) -> int:
@@ -61,7 +57,7 @@ def assert_succeeded_exactly_once(
 ) -> dict[str, Any]:
     final = client.wait(job_id, timeout_s=180)
     assert final["status"] == "succeeded", final.get("error")
-    assert job_service(service).chunk_completions(job_id) == {"0": 1, "1": 1, "merge": 1}
+    assert service.steps(job_id).completions() == {"0": 1, "1": 1, "merge": 1}
     names = [a["name"] for a in client.artifacts(job_id)]
     assert len(names) == len(set(names)) and names.count("image.exr") == 1
     assert sorted(n for n in names if n.startswith("chunks/")) == ["chunks/0.npz", "chunks/1.npz"]
@@ -74,7 +70,7 @@ def assert_handed_back(service: LiveService, job_id: str, horse_pid: int) -> Non
     assert rq_job.get_status() == RQJobStatus.QUEUED
     assert rq_job.retries_left == service.settings.chunk_retry_max
     assert not os.path.exists(f"/proc/{horse_pid}")
-    assert job_service(service).chunk_completions(job_id) == {}
+    assert service.steps(job_id).completions() == {}
 
 
 @pytest.fixture
@@ -90,7 +86,7 @@ def test_sigterm_lets_the_current_chunk_finish_within_the_grace(service: LiveSer
     stopping.send_signal(signal.SIGTERM)  # to the worker only, as Kubernetes signals a container's PID 1
     assert wait_exit(stopping, 60) == 0
     # The stopping worker finished its chunk but took nothing new (chunk 1 and the merge wait).
-    assert job_service(service).chunk_completions(job_id) == {"0": 1}
+    assert service.steps(job_id).completions() == {"0": 1}
     assert client.get(job_id)["status"] == "running"
     service.start_worker("merger")
     final = assert_succeeded_exactly_once(service, client, job_id)

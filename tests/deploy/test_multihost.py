@@ -30,11 +30,12 @@ from typing import Any
 import pytest
 import redis
 
+from hgcore.jobs.lifecycle import JobLifecycle
 from hgcore.settings import Settings
-from hgcore.store import store_from_settings
+from hgcore.store.filesystem import FilesystemStore
 from hgrender.cli.service import worker_command_line
-from service.jobs import JobService
-from tests.service.conftest import tiny_scene, wait_for
+from tests.support.processes import wait_for
+from tests.support.scenes import tiny_scene
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
@@ -208,16 +209,10 @@ def _ready(cluster: Cluster) -> bool:
     return False
 
 
-def jobs_of(cluster: Cluster) -> JobService:
-    """The job bookkeeping through the unix socket of the same Redis server."""
-    settings = Settings(
-        redis_url=f"unix://{cluster.redis_socket}",
-        store="filesystem",
-        store_dir=cluster.work_dir / "artifacts",
-    )
-    return JobService(
-        redis.Redis(unix_socket_path=str(cluster.redis_socket)), store_from_settings(settings), settings
-    )
+def jobs_of(cluster: Cluster) -> JobLifecycle:
+    """The jobs through the unix socket of the same Redis server."""
+    store = FilesystemStore(cluster.work_dir / "artifacts")
+    return JobLifecycle(redis.Redis(unix_socket_path=str(cluster.redis_socket)), store)
 
 
 def wait_finished(cluster: Cluster, job_id: str, timeout_s: float) -> dict[str, Any]:
@@ -245,7 +240,7 @@ def test_chunks_are_split_across_both_worker_hosts(cluster: Cluster) -> None:
     assert final["status"] == "succeeded", final.get("error")
     assert {c["worker"] for c in final["chunks"]} == {"host1", "host2"}
     jobs = jobs_of(cluster)
-    assert jobs.chunk_completions(created["id"]) == {"0": 1, "1": 1, "2": 1, "3": 1, "merge": 1}
+    assert jobs.steps(created["id"]).completions() == {"0": 1, "1": 1, "2": 1, "3": 1, "merge": 1}
     # Both workers talk to Redis from their own host's address, not through loopback.
     clients = jobs.client.client_list()
     peers = {c["addr"].rsplit(":", 1)[0] for c in clients}
@@ -263,14 +258,12 @@ def test_cutting_off_a_worker_host_mid_chunk_still_succeeds_exactly_once(cluster
     job_id = created["id"]
 
     def host2_rendering() -> str | None:
-        fields = jobs.chunk_fields(job_id)
+        chunks = jobs.steps(job_id).chunks
         return next(
             (
-                i
-                for i in "0123"
-                if fields.get(f"{i}.worker") == "host2"
-                and fields.get(f"{i}.status") == "running"
-                and float(fields.get(f"{i}.progress", 0)) > 0
+                str(i)
+                for i, chunk in enumerate(chunks)
+                if chunk.worker == "host2" and chunk.status == "running" and chunk.progress > 0
             ),
             None,
         )
@@ -279,7 +272,7 @@ def test_cutting_off_a_worker_host_mid_chunk_still_succeeds_exactly_once(cluster
     _ip("-n", cluster.ns("host2"), "link", "set", "eth0", "down")
     final = wait_finished(cluster, job_id, 120)
     assert final["status"] == "succeeded", final.get("error")
-    assert jobs.chunk_completions(job_id) == {"0": 1, "1": 1, "2": 1, "3": 1, "merge": 1}
+    assert jobs.steps(job_id).completions() == {"0": 1, "1": 1, "2": 1, "3": 1, "merge": 1}
     assert final["chunks"][int(index)]["worker"] == "host1"
     assert final["chunks"][int(index)]["attempts"] == 2
     assert_one_set_of_artifacts(cluster, job_id, 4)

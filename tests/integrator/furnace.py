@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from hgcore.artifacts.exr import read_exr
-from worker.render.api import render_scene
+from schemas import validate_scene
+from worker.render.chunks import render_scene
 
 BOX_HALF_SIZE_M = 3.0
 WALLS = [  # (centre axis, sign): the wall at sign·half-size along that axis, emitting inwards
@@ -77,7 +78,7 @@ def _read(path: Path) -> dict[str, np.ndarray]:
 def _object_bands(scene: dict[str, Any], out_dir: Path, seed: int) -> list[np.ndarray]:
     """Render; per band, the object pixels' radiance over the walls'. Object pixels are those whose first
     hit is nearer than any wall can be (depth < 2.5 m)."""
-    render_scene(scene, out_dir, seed=seed)
+    render_scene(validate_scene(scene), out_dir, seed=seed)
     image = _read(out_dir / "image.exr")
     bands = sorted(name for name in image if name.startswith("S0."))
     mask = image["depth"] < 2.5

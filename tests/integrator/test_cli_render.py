@@ -7,8 +7,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tests.support.scenes import example
+
 HGRENDER = Path(sys.executable).parent / "hgrender"
-EXAMPLE = Path(__file__).parents[2] / "schemas" / "examples" / "cornell_box.json"
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
@@ -16,8 +17,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_render_writes_artifacts_and_reports_json(tmp_path: Path) -> None:
-    scene = json.loads(EXAMPLE.read_text())
-    scene["film"].update(width=12, height=12)
+    scene = example("cornell_box", width=12, height=12)
     scene_path = tmp_path / "scene.json"
     scene_path.write_text(json.dumps(scene))
     result = run(
@@ -33,8 +33,7 @@ def test_render_writes_artifacts_and_reports_json(tmp_path: Path) -> None:
 
 
 def test_render_rejects_bad_input_naming_the_field(tmp_path: Path) -> None:
-    scene = json.loads(EXAMPLE.read_text())
-    scene["film"]["bands"] = 0
+    scene = example("cornell_box", bands=0)
     scene_path = tmp_path / "bad.json"
     scene_path.write_text(json.dumps(scene))
     result = run("render", str(scene_path), "-o", str(tmp_path / "out"))

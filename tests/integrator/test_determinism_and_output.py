@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
+from schemas import validate_scene
 from tests.integrator.scenes import plane_under_source
-from worker.render.api import plan_chunks, render_scene
+from worker.render.chunks import plan_chunks, render_scene
 
 SPHERE = {
     "type": "sphere",
@@ -43,9 +44,9 @@ def test_plan_chunks_partitions_spp_with_distinct_seeds() -> None:
 
 
 def test_same_seed_is_bitwise_identical_and_other_seed_differs(scene: dict, tmp_path: Path) -> None:
-    render_scene(scene, tmp_path / "a", seed=3)
-    render_scene(scene, tmp_path / "b", seed=3)
-    render_scene(scene, tmp_path / "c", seed=4)
+    render_scene(validate_scene(scene), tmp_path / "a", seed=3)
+    render_scene(validate_scene(scene), tmp_path / "b", seed=3)
+    render_scene(validate_scene(scene), tmp_path / "c", seed=4)
     _, a, _ = read_exr_stack(tmp_path / "a" / "image.exr")
     _, b, _ = read_exr_stack(tmp_path / "b" / "image.exr")
     _, c, _ = read_exr_stack(tmp_path / "c" / "image.exr")
@@ -54,8 +55,8 @@ def test_same_seed_is_bitwise_identical_and_other_seed_differs(scene: dict, tmp_
 
 
 def test_split_render_matches_unsplit_in_sample_count_and_expectation(scene: dict, tmp_path: Path) -> None:
-    whole = render_scene(scene, tmp_path / "whole", spp=16, seed=1)
-    split = render_scene(scene, tmp_path / "split", spp=16, seed=1, chunks=4)
+    whole = render_scene(validate_scene(scene), tmp_path / "whole", spp=16, seed=1)
+    split = render_scene(validate_scene(scene), tmp_path / "split", spp=16, seed=1, chunks=4)
     assert whole["spp"] == split["spp"] == 16
     names, whole_pixels, _ = read_exr_stack(tmp_path / "whole" / "image.exr")
     _, split_pixels, _ = read_exr_stack(tmp_path / "split" / "image.exr")
@@ -70,7 +71,7 @@ def test_split_render_matches_unsplit_in_sample_count_and_expectation(scene: dic
 
 
 def test_exr_channels_and_attributes_follow_the_contract(scene: dict, tmp_path: Path) -> None:
-    summary = render_scene(scene, tmp_path, spp=4)
+    summary = render_scene(validate_scene(scene), tmp_path, spp=4)
     names, pixels, attributes = read_exr_stack(tmp_path / "image.exr")
     spectral = [name for name in names if name.startswith("S0.")]
     assert len(spectral) == 8

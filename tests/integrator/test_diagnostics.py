@@ -15,8 +15,9 @@ import numpy as np
 
 from hgcore.artifacts.exr import read_exr
 from hgcore.optics.calculator import coherence_at
+from schemas import validate_scene
 from tests.integrator.scenes import plane_under_source
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 SIZE = 24
 CAMERA_HEIGHT_M = 3.0
@@ -71,7 +72,7 @@ def test_sphere_source_diagnostics_match_the_calculator(tmp_path: Path) -> None:
         size_px=SIZE,
         spp=4,
     )
-    render_scene(scene, tmp_path)
+    render_scene(validate_scene(scene), tmp_path)
     data = channels(tmp_path / "image.exr")
     pixels = lit_plane_pixels(data, 0)
     for row, column, point in pixels:
@@ -100,7 +101,7 @@ def test_cylinder_source_anisotropy_and_orientation_match_the_calculator(tmp_pat
         size_px=SIZE,
         spp=4,
     )
-    render_scene(scene, tmp_path)
+    render_scene(validate_scene(scene), tmp_path)
     data = channels(tmp_path / "image.exr")
     pixels = lit_plane_pixels(data, 1)
     for row, column, point in pixels:

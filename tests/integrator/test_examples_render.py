@@ -2,23 +2,23 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
-from worker.render.api import render_scene
+from schemas import validate_scene
+from tests.support.scenes import example
+from worker.render.chunks import render_scene
 
 EXAMPLES = sorted((Path(__file__).parents[2] / "schemas" / "examples").glob("*.json"))
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
 def test_example_renders(path: Path, tmp_path: Path) -> None:
-    scene = json.loads(path.read_text())
-    scene["film"] = {**scene.get("film", {}), "width": 16, "height": 16}
-    summary = render_scene(scene, tmp_path, spp=2)
+    scene = example(path.stem, width=16, height=16)
+    summary = render_scene(validate_scene(scene), tmp_path, spp=2)
     image = read_exr(tmp_path / "image.exr")
     assert np.all(np.isfinite(image.stack()))
     assert image.stack(image.band_names()).mean() > 0.0  # some light reaches the camera

@@ -34,9 +34,9 @@ from hgcore.optics.thin_film import (
     gaussian_visibilities,
     transmission_terms,
 )
-from schemas import build
+from schemas import build, validate_scene
 from tests.integrator.scenes import coated_plane
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 THICKNESS_M = 1.0e-6
 FILM_IOR = 2.1
@@ -97,7 +97,7 @@ def expected_band_values(sphere_radius_m: float, edges_nm: np.ndarray) -> np.nda
 
 def rendered_band_values(sphere_radius_m: float, tmp_path: Path) -> tuple[np.ndarray, np.ndarray, list]:
     out = tmp_path / f"R{sphere_radius_m}"
-    render_scene(scene(sphere_radius_m), out, seed=5)
+    render_scene(validate_scene(scene(sphere_radius_m)), out, seed=5)
     image = read_exr(out / "image.exr")
     bands = [name for name in image.channels if name.startswith("S0.")]
     per_pixel = np.stack([image.channels[name].astype(float).ravel() for name in bands])

@@ -5,7 +5,6 @@ unfrozen, with the same sums, instead of failing."""
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import subprocess
@@ -16,10 +15,10 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from schemas import EXAMPLES_DIR
+from schemas import validate_scene
 from tests.integrator.furnace import furnace_scene, sphere
-from worker.mitsuba_setup import load_mitsuba
-from worker.render.api import as_scene
+from tests.support.scenes import example
+from worker.mitsuba_setup import configured_mitsuba
 from worker.render.renderer import Renderer
 from worker.render.scene_compiler import SceneCompiler
 from worker.render.spectral import cie1931_xyz
@@ -41,12 +40,9 @@ EXAMPLES = (
 )
 
 
-def small(scene: dict) -> dict:
-    return {**scene, "film": {**scene["film"], "width": WIDTH, "height": HEIGHT, "spp": SPP}}
-
-
-def example(name: str) -> dict:
-    return small(json.loads((EXAMPLES_DIR / f"{name}.json").read_text()))
+def small(name: str) -> dict:
+    """The example ``name`` at the tests' film size and spp."""
+    return example(name, width=WIDTH, height=HEIGHT, spp=SPP)
 
 
 def rough_glass() -> dict:
@@ -56,12 +52,13 @@ def rough_glass() -> dict:
         "roughness_rms_um": 0.1,
         "correlation_length_um": 2.0,
     }
-    return small(furnace_scene(material, sphere()))
+    scene = furnace_scene(material, sphere())
+    return {**scene, "film": {**scene["film"], "width": WIDTH, "height": HEIGHT, "spp": SPP}}
 
 
 def fresh_renderer(scene: dict) -> Renderer:
     """A renderer of its own (``renderer_for`` shares one per scene across tests)."""
-    return Renderer(SceneCompiler(load_mitsuba()).compile(as_scene(scene)))
+    return Renderer(SceneCompiler(configured_mitsuba()).compile(validate_scene(scene)))
 
 
 def sums_of(renderer: Renderer, seed: int) -> dict[str, np.ndarray]:
@@ -74,7 +71,7 @@ def assert_bitwise_equal(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> 
     assert [key for key in a if not np.array_equal(a[key], b[key])] == []
 
 
-SCENES = {**{name: (lambda name=name: example(name)) for name in EXAMPLES}, "rough_glass": rough_glass}
+SCENES = {**{name: (lambda name=name: small(name)) for name in EXAMPLES}, "rough_glass": rough_glass}
 
 
 @pytest.mark.parametrize("name", list(SCENES))
@@ -99,11 +96,11 @@ def test_replayed_passes_are_the_traced_passes(name: str) -> None:
 
 def test_the_examples_cover_importance_sampled_wavelengths() -> None:
     """The table of the importance-sampled wavelengths is among the inputs the cases above exercise."""
-    assert sampling_mode(as_scene(example("thin_film_cylinder_light"))) == "importance"
+    assert sampling_mode(validate_scene(small("thin_film_cylinder_light"))) == "importance"
 
 
 def test_a_changed_setting_records_again() -> None:
-    renderer = fresh_renderer(example("cornell_box"))
+    renderer = fresh_renderer(small("cornell_box"))
     deep = sums_of(renderer, 5)
     renderer.integrator.max_depth = 2  # direct light only: less light than before
     direct = sums_of(renderer, 5)
@@ -114,8 +111,8 @@ def test_a_changed_setting_records_again() -> None:
 
 
 def test_a_pass_that_cannot_be_recorded_renders_unfrozen(caplog: pytest.LogCaptureFixture) -> None:
-    renderer = fresh_renderer(example("cornell_box"))
-    expected = sums_of(fresh_renderer(example("cornell_box")), 6)
+    renderer = fresh_renderer(small("cornell_box"))
+    expected = sums_of(fresh_renderer(small("cornell_box")), 6)
 
     def state_without_the_spectra(*arguments: object) -> tuple[list, tuple]:
         tables, settings = Renderer._pass_state(renderer, *arguments)
@@ -131,8 +128,8 @@ def test_a_pass_that_cannot_be_recorded_renders_unfrozen(caplog: pytest.LogCaptu
 
 
 def test_the_cie_table_interpolates_as_mitsuba() -> None:
-    mi = load_mitsuba()
-    renderer = fresh_renderer(example("cornell_box"))
+    mi = configured_mitsuba()
+    renderer = fresh_renderer(small("cornell_box"))
     wavelengths = mi.Float(np.linspace(340.0, 850.0, 20011, dtype=np.float32))  # both ends outside
     ours = cie1931_xyz(mi, renderer.integrator.context.cie1931, wavelengths)
     theirs = mi.cie1931_xyz(wavelengths)
@@ -143,15 +140,15 @@ def test_the_cie_table_interpolates_as_mitsuba() -> None:
 
 RETIRED_RENDERER = """
 import gc, json
-from schemas import EXAMPLES_DIR
-from worker.mitsuba_setup import load_mitsuba
-from worker.render.api import as_scene
+from schemas import EXAMPLES_DIR, validate_scene
+from worker.mitsuba_setup import configure_mitsuba
+mi = configure_mitsuba()  # this process's entry point, before the renderer is imported
 from worker.render.renderer import Renderer
 from worker.render.scene_compiler import SceneCompiler
 
 scene = json.loads((EXAMPLES_DIR / "cornell_box.json").read_text())
 scene["film"] = {**scene["film"], "width": 16, "height": 16, "spp": 4}
-compiled = lambda: SceneCompiler(load_mitsuba()).compile(as_scene(scene))
+compiled = lambda: SceneCompiler(mi).compile(validate_scene(scene))
 retired = [Renderer(compiled())]
 retired[0].render_sums(4, 1)
 renderer = Renderer(compiled())

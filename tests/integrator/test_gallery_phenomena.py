@@ -22,8 +22,9 @@ import pytest
 from hgcore.artifacts.exr import read_exr
 from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.thin_film import film_shear
-from tests.render.scenes import example
-from worker.render.api import render_scene
+from schemas import validate_scene
+from tests.support.scenes import example
+from worker.render.chunks import render_scene
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
 
@@ -42,7 +43,7 @@ def render(name: str, tmp_path: Path, size_px: int, spp: int, scene: dict | None
     out = tmp_path / name
     if scene is None:
         scene = example(name, width=size_px, height=size_px, spp=spp)
-    render_scene(scene, out, spp=spp)
+    render_scene(validate_scene(scene), out, spp=spp)
     image = read_exr(out / "image.exr")
     bands = image.band_names()
     return Render(
@@ -156,7 +157,7 @@ def chromatic_spread(scene: dict, tmp_path: Path, tag: str) -> tuple[float, floa
     chromaticities = []
     for seed in (1, 2):
         out = tmp_path / f"{tag}_{seed}"
-        render_scene(scene, out, seed=seed)
+        render_scene(validate_scene(scene), out, seed=seed)
         chromaticities.append(highlight_chromaticity(out, bin_px=2, floor=0.02))
     (a, lit_a), (b, lit_b) = chromaticities
     lit = lit_a & lit_b
@@ -252,7 +253,7 @@ def test_cylinder_source_keeps_the_film_colours_only_where_the_normal_is_across_
         chromaticity = {}
         for tag, variant in (("coated", scene), ("bare", bare_silver(scene))):
             out = tmp_path / f"{kind}_{tag}"
-            render_scene(variant, out, seed=3)
+            render_scene(validate_scene(variant), out, seed=3)
             chromaticity[tag] = highlight_chromaticity(out, bin_px=bin_px, floor=0.02)
         (coated, lit_coated), (bare, lit_bare) = chromaticity["coated"], chromaticity["bare"]
         departures[kind] = (np.linalg.norm(coated - bare, axis=-1), lit_coated & lit_bare)
@@ -375,7 +376,7 @@ def test_sixteen_modes_differ_from_one_mode_only_slightly(tmp_path: Path) -> Non
     disc's grating or the coated shell: were the modes unused, every pixel would be bitwise the same
     (ΔE₀₀ = 0). At 48² × 16 spp 3.1–3.6 % of the pixels differ over seeds 0–4; how much the most changed
     one differs depends on the paths a seed draws (max ΔE₀₀ 0.001–0.011), so the test counts pixels."""
-    from service.image_metrics import delta_e00_map
+    from hgcore.image_metrics import delta_e00_map
 
     one = render("fig9_modes_1", tmp_path, 48, 16)
     sixteen = render("fig9_modes_16", tmp_path, 48, 16)

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
-from schemas import build
-from worker.render.api import render_scene
+from schemas import build, validate_scene
+from worker.render.chunks import render_scene
 
 BOX = build.scene(
     "object in a box",
@@ -44,7 +44,7 @@ BOX = build.scene(
 def render_bands(material: dict, tmp_path: Path, name: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
     scene = copy.deepcopy(BOX)
     scene["materials"]["object"] = material
-    render_scene(scene, tmp_path / name, seed=seed)
+    render_scene(validate_scene(scene), tmp_path / name, seed=seed)
     image = read_exr(tmp_path / name / "image.exr")
     variance = read_exr(tmp_path / name / "variance.exr")
     bands = image.band_names()

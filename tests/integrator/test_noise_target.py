@@ -14,8 +14,9 @@ from hgcore.artifacts.layout import LUMINANCE_VARIANCE
 from hgcore.colour import y_bar_integral_nm
 from hgcore.errors import InputError
 from hgcore.noise_target import NoiseTarget, next_round_spp
+from schemas import validate_scene
 from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
-from worker.render.api import ChunkSpec, as_scene, chunk_seed, render_scene, render_to_dir
+from worker.render.chunks import ChunkSpec, chunk_seed, render_scene, render_to_dir
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +42,7 @@ def test_band_mean_target_is_met_by_the_written_image_and_rounds_are_determinist
 ) -> None:
     target = NoiseTarget(rel_error=0.01)
     reported: list[float] = []
-    summary = render_scene(scene, tmp_path / "a", target=target, progress=reported.append)
+    summary = render_scene(validate_scene(scene), tmp_path / "a", target=target, progress=reported.append)
     block = summary["noise_target"]
     # Progress never goes back when a round is added, and stays within [0, 1].
     assert reported == sorted(reported) and reported[0] > 0 and reported[-1] <= 1.0
@@ -55,10 +56,10 @@ def test_band_mean_target_is_met_by_the_written_image_and_rounds_are_determinist
     # The previous round missed the target: rounds stop as soon as it is met.
     assert block["rounds"][-2]["rel_error"] > 0.01
     # Same target → same rounds → same bits; and the rounds are a fixed render of those chunks.
-    again = render_scene(scene, tmp_path / "b", target=target)
+    again = render_scene(validate_scene(scene), tmp_path / "b", target=target)
     assert again["noise_target"]["rounds"][-1]["spp"] == block["spp"]
     totals = [0] + [r["spp"] for r in block["rounds"]]
-    parsed = as_scene(scene)
+    parsed = validate_scene(scene)
     chunks = [
         ChunkSpec(i, totals[i + 1] - totals[i], chunk_seed(parsed.film.seed, i))
         for i in range(len(totals) - 1)
@@ -71,7 +72,7 @@ def test_band_mean_target_is_met_by_the_written_image_and_rounds_are_determinist
 
 
 def test_luminance_quantile_target_is_met_per_pixel(scene: dict, tmp_path: Path) -> None:
-    summary = render_scene(scene, tmp_path, target=NoiseTarget(rel_error=0.05, quantile=0.5))
+    summary = render_scene(validate_scene(scene), tmp_path, target=NoiseTarget(rel_error=0.05, quantile=0.5))
     block = summary["noise_target"]
     assert block["metric"] == "luminance_quantile" and block["met"]
     variance = read_exr(tmp_path / "variance.exr").channels[LUMINANCE_VARIANCE].astype(np.float64)
@@ -89,7 +90,9 @@ def test_luminance_quantile_target_is_met_per_pixel(scene: dict, tmp_path: Path)
 
 
 def test_a_time_budget_stops_the_rounds(scene: dict, tmp_path: Path) -> None:
-    summary = render_scene(scene, tmp_path, target=NoiseTarget(rel_error=1e-6, time_budget_s=3.0))
+    summary = render_scene(
+        validate_scene(scene), tmp_path, target=NoiseTarget(rel_error=1e-6, time_budget_s=3.0)
+    )
     block = summary["noise_target"]
     assert not block["met"] and block["stop_reason"] == "time_budget"
     # The last round was sized to the budget left at the rate measured before it (wall time elapsed

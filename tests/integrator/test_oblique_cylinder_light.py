@@ -42,11 +42,11 @@ from hgcore.optics.sources import (
     source_coefficients,
 )
 from hgcore.optics.thin_film import bounded_reflectance, film_reflectance_terms
-from schemas import build
+from schemas import build, validate_scene
 from tests.integrator.scenes import coated_plane
-from worker.mitsuba_setup import load_mitsuba
-from worker.render.api import render_scene
-from worker.render.emitters import CylinderModes, EmitterKind, EmitterRecord, EmitterTable
+from worker.mitsuba_setup import configured_mitsuba
+from worker.render.chunks import render_scene
+from worker.render.emitters import CylinderModes, EmitterGeometry, EmitterKind, EmitterTable
 
 MODES = 16
 FLOAT32_ERROR = 1e-6
@@ -65,9 +65,9 @@ def _unit(vector) -> np.ndarray:
 def kernel_coefficients(radius_m: float, length_m: float, angles_deg: list[float]) -> list[dict]:
     """``CylinderModes.coefficients`` for one cylinder seen at each angle θ (view direction to axis), one
     lane per angle, in a transverse frame turned about the view (the kernel may not assume û = x)."""
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     axis = _unit((0.3, -0.5, 0.8))
-    record = EmitterRecord(
+    record = EmitterGeometry(
         EmitterKind.CYLINDER, (0.1, 0.2, 0.3), axis=tuple(axis), radius_m=radius_m, length_m=length_m
     )
     across = _unit(np.cross(axis, (1.0, 0.0, 0.0)))
@@ -193,7 +193,7 @@ def exact_and_rectangle_predictions() -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_oblique_cylinder_renders_the_fringes_of_its_exact_modes(tmp_path: Path) -> None:
-    render_scene(coated_mirror_scene(), tmp_path, seed=5)
+    render_scene(validate_scene(coated_mirror_scene()), tmp_path, seed=5)
     image = read_exr(tmp_path / "image.exr")
     bands = [name for name in image.channels if name.startswith("S0.")]
     per_pixel = np.stack([image.channels[name].astype(float).ravel() for name in bands])
@@ -214,12 +214,12 @@ def test_exact_and_rectangle_modes_predict_different_fringes() -> None:
 
 def test_rectangles_beside_a_cylinder_keep_the_rectangle_modes() -> None:
     """In a scene with both, the per-lane coefficients of a rectangle's lanes are the universal ones."""
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     records = [
-        EmitterRecord(
+        EmitterGeometry(
             EmitterKind.CYLINDER, (0.0, 0.0, 0.0), axis=(0.0, 0.6, 0.8), radius_m=0.01, length_m=0.02
         ),
-        EmitterRecord(EmitterKind.RECTANGLE, (0.0, 0.0, 1.0), width_m=0.3, height_m=0.1),
+        EmitterGeometry(EmitterKind.RECTANGLE, (0.0, 0.0, 1.0), width_m=0.3, height_m=0.1),
     ]
     modes = CylinderModes.for_scene(mi, {EmitterKind.CYLINDER, EmitterKind.RECTANGLE}, MODES)
     lanes = mi.UInt32([0, 1])

@@ -9,12 +9,14 @@ import pytest
 
 from hgcore.artifacts.exr import read_exr
 from hgcore.artifacts.layout import VARIANCE_EXR
-from tests.render.scenes import COATED_PLANE, constant_spectrum, example
-from worker.render.api import render_scene
+from schemas import validate_scene
+from tests.render.scenes import COATED_PLANE, constant_spectrum
+from tests.support.scenes import example
+from worker.render.chunks import render_scene
 
 
 def render_bands(scene: dict, out: Path, integrator: str) -> tuple[np.ndarray, np.ndarray]:
-    render_scene(scene, out, integrator=integrator)
+    render_scene(validate_scene(scene), out, integrator=integrator)
     image, variance = read_exr(out / "image.exr"), read_exr(out / VARIANCE_EXR)
     return image.stack(image.band_names()), variance.stack(image.band_names())
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from hgcore.artifacts.exr import read_exr
-from schemas import build
-from worker.render.api import render_scene
+from schemas import build, validate_scene
+from worker.render.chunks import render_scene
 
 SCENE = build.scene(
     "floor lit by a wall",
@@ -46,7 +46,7 @@ SCENE = build.scene(
 def diagnostics(radius_m: float, tmp_path: Path) -> dict[str, np.ndarray]:
     scene = copy.deepcopy(SCENE)
     scene["materials"]["wall"]["scattering_region_radius_m"] = radius_m
-    render_scene(scene, tmp_path / f"a{radius_m}", seed=7)
+    render_scene(validate_scene(scene), tmp_path / f"a{radius_m}", seed=7)
     channels = read_exr(tmp_path / f"a{radius_m}" / "image.exr").channels
     return {name: values for name, values in channels.items() if name.startswith("coherence.")}
 

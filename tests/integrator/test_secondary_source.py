@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
-from schemas import build
-from worker.render.api import render_scene
+from schemas import build, validate_scene
+from worker.render.chunks import render_scene
 
 K_PER_M = 2 * math.pi / 550e-9
 PATCH_CENTRE = np.array([-0.5, 1.0, 0.0])
@@ -94,7 +94,7 @@ def vcz_coherence_lengths_um(side_m: float, receiver_x_m: float, nodes: int = 16
 def rendered_coherence_lengths_um(side_m: float, receiver_x_m: float, tmp_path: Path):
     """(ℓ₁, ℓ₂) of the pixel-mean M and their standard errors, and the mean r (m)."""
     out = tmp_path / f"a{side_m}_x{receiver_x_m}"
-    render_scene(scene(side_m, receiver_x_m), out, seed=3)
+    render_scene(validate_scene(scene(side_m, receiver_x_m)), out, seed=3)
     channel = {
         name: values.astype(float).ravel() for name, values in read_exr(out / "image.exr").channels.items()
     }

@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
-from schemas import build
-from worker.render.api import render_scene
+from schemas import build, validate_scene
+from worker.render.chunks import render_scene
 
 HEIGHT_M = 0.6
 POWER_W = 1.0
@@ -52,7 +52,7 @@ def scene(radius_m: float) -> dict:
 
 
 def floor_radiance(radius_m: float, out_dir: Path) -> np.ndarray:
-    render_scene(scene(radius_m), out_dir, seed=5)
+    render_scene(validate_scene(scene(radius_m)), out_dir, seed=5)
     image = read_exr(out_dir / "image.exr").channels
     bands = sorted(name for name in image if name.startswith("S0."))
     return np.stack([image[name] for name in bands]).astype(float)

@@ -22,8 +22,9 @@ from hgcore.artifacts.pixel_sums import (
 )
 from hgcore.artifacts.running_sums import RunningSums
 from hgcore.noise_target import ImageErrors
+from schemas import validate_scene
 from tests.integrator.scenes import D65_SPHERE_SOURCE, plane_under_source
-from worker.render.api import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
+from worker.render.chunks import merge_chunks, plan_chunks, render_chunk, render_scene, renderer_for
 from worker.render.renderer import row_order, tile_rows, tile_seed
 
 
@@ -55,9 +56,7 @@ def test_tile_plan_covers_the_image_in_row_bands(scene: dict, small_tiles: int) 
     assert tile_rows(20, 20) == small_tiles
     assert tile_rows(1 << 20, 4) == 1  # never fewer than one row
     assert tile_rows(8, 4) == 4  # never more than the image
-    from worker.render.api import as_scene
-
-    tiles = renderer_for(as_scene(scene)).tiles()
+    tiles = renderer_for(validate_scene(scene)).tiles()
     assert tiles[0] == (0, 3) and tiles[-1] == (18, 20)
     assert all(a[1] == b[0] for a, b in itertools.pairwise(tiles))
 
@@ -65,19 +64,24 @@ def test_tile_plan_covers_the_image_in_row_bands(scene: dict, small_tiles: int) 
 def test_tile_major_chunk_major_and_merged_partials_are_bitwise_equal(
     scene: dict, small_tiles: int, tmp_path: Path
 ) -> None:
-    tile_major = render_scene(scene, tmp_path / "tile_major", chunks=3)
+    tile_major = render_scene(validate_scene(scene), tmp_path / "tile_major", chunks=3)
     previews: list[int] = []
     render_scene(
-        scene, tmp_path / "chunk_major", chunks=3, on_chunk=lambda s: previews.append(s.sample_count)
+        validate_scene(scene),
+        tmp_path / "chunk_major",
+        chunks=3,
+        on_chunk=lambda s: previews.append(s.sample_count),
     )
     assert previews == [2, 4, 6]
     paths = []
     for chunk in plan_chunks(6, 3, scene["film"].get("seed", 0)):
         path = tmp_path / "partials" / f"{chunk.index}.npz"
-        result = render_chunk(scene, chunk, path)
+        result = render_chunk(validate_scene(scene), chunk, path)
         assert result["samples"] == 2 * 20 * 20
         paths.append(path)
-    merged = merge_chunks(scene, list(reversed(paths)), tmp_path / "merged")  # order: by chunk index
+    merged = merge_chunks(
+        validate_scene(scene), list(reversed(paths)), tmp_path / "merged"
+    )  # order: by chunk index
     assert tile_major["spp"] == merged["spp"] == 6
     assert_bitwise_equal(tmp_path / "tile_major", tmp_path / "chunk_major")
     assert_bitwise_equal(tmp_path / "tile_major", tmp_path / "merged")
@@ -88,9 +92,9 @@ def test_tiles_render_distinct_samples_with_the_same_expectation(
     scene: dict, small_tiles: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Tiles have their own seeds; the image mean agrees with an untiled render within its MC error."""
-    render_scene(scene, tmp_path / "tiled", spp=32)
+    render_scene(validate_scene(scene), tmp_path / "tiled", spp=32)
     monkeypatch.setattr(renderer_module, "TILE_PIXELS", 1 << 18)
-    render_scene(scene, tmp_path / "whole", spp=32)
+    render_scene(validate_scene(scene), tmp_path / "whole", spp=32)
     tiled, whole = all_channels(tmp_path / "tiled"), all_channels(tmp_path / "whole")
     band = next(name for name in tiled if name.startswith("S0."))
     assert not np.array_equal(tiled[band][3:], whole[band][3:])  # rows below the first tile differ

@@ -18,7 +18,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 from hgcore.artifacts.exr import read_exr
 from hgcore.optics.calculator import coherence_at
 from schemas.usd_import import import_usd_isolated
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 LENGTH_M = 0.2
 RADIUS_M = 0.001

@@ -27,8 +27,8 @@ from schemas import build
 from schemas.validation import validate_scene
 from tests.integrator.scenes import plane_under_source
 from tests.render.chi2 import discrete_chi2, sidak_level
-from tests.render.scenes import example
-from worker.mitsuba_setup import load_mitsuba
+from tests.support.scenes import example
+from worker.mitsuba_setup import configured_mitsuba
 from worker.render.renderer import Renderer
 from worker.render.scene_compiler import SceneCompiler
 from worker.render.wavelength_sampling import (
@@ -93,7 +93,7 @@ def test_line_spikiness_of_flat_and_single_line_spectra() -> None:
 
 
 def _draw(bands: BandLayout, density, count: int, seed: int):
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     sampler = mi.load_dict({"type": "independent"})
     sampler.seed(seed, count)
     hero_set = WavelengthSampler(mi, bands, density).sample(sampler.next_1d())
@@ -143,7 +143,7 @@ def test_sampler_matches_its_density() -> None:
 
 def _render(scene: dict, mode: str, seed: int):
     scene = {**scene, "film": {**scene["film"], "wavelength_sampling": mode}}
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     compiled = SceneCompiler(mi).compile(validate_scene(scene))
     sums = Renderer(compiled).render_sums(scene["film"]["spp"], seed)
     return images_from_sums(sums, compiled.bands)
@@ -195,7 +195,7 @@ def test_importance_lowers_chroma_variance_under_f11() -> None:
 
 
 def test_cornell_box_under_f11_matches_path(tmp_path: Path) -> None:
-    from tests.render.test_reference_path import assert_agreement
+    from tests.render.reference import assert_agreement
 
     scene = example("cornell_box", width=32, height=32, spp=512, bands=8, max_depth=5)
     for emitter in scene["emitters"]:

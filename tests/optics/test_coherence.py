@@ -186,9 +186,9 @@ def test_drjit_degree_of_coherence_and_diagnostics_equal_numpy() -> None:
     # Single-precision Dr.Jit evaluation of the same code: Hermite recurrences to degree 6 plus a 2×2
     # eigen-decomposition, ~50 float32 operations (ε ≈ 6e-8) with |ĉ| ≲ 2 ⇒ agreement to 1e-4 absolute on
     # μ ∈ [−1, 1]; diagnostics to 1e-5 relative.
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configured_mitsuba
 
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     import drjit as dr
 
     from worker.render.drjit_ops import drjit_ops

@@ -67,9 +67,9 @@ def test_invalid_vectors() -> None:
 
 def test_drjit_frame_equals_numpy() -> None:
     # Same arithmetic in float32 (ε ≈ 6e-8; ~10 operations and one rsqrt): 1e-6 absolute on unit vectors.
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configured_mitsuba
 
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     import drjit as dr
 
     from worker.render.drjit_ops import drjit_ops

@@ -26,7 +26,7 @@ from hgcore.optics.sources import (
     open_cylinder_table_obliquities,
     source_coefficients,
 )
-from tests.optics.test_sources import MC_SIGMAS, silhouette_samples, unit
+from tests.optics.silhouettes import MC_SIGMAS, silhouette_samples, unit
 
 RADIUS_M, LENGTH_M = 0.02, 0.15
 DIRECTION = unit((0.1, -0.2, 1.0))

@@ -33,9 +33,9 @@ COUNT = 4096
 
 @pytest.fixture(scope="module")
 def drjit_env() -> tuple[Any, Any, Any]:
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configure_mitsuba
 
-    load_mitsuba("llvm_ad_spectral")
+    configure_mitsuba("llvm_ad_spectral")
     import drjit as dr
     from drjit.llvm import Float
 

@@ -130,9 +130,9 @@ def test_drjit_evaluation_equals_numpy() -> None:
     # The same recurrence on Dr.Jit single-precision arrays (the integrator's mi.Float). Float32 rounding
     # (ε ≈ 6e-8) accumulated over ~16 recurrence steps with cancellation ≲ 1e2 gives ≲ 1e-4 relative to the
     # largest |Ψ|; entries of Θ are passed as separate Python floats.
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configured_mitsuba
 
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     import drjit as dr
 
     from worker.render.drjit_ops import drjit_ops

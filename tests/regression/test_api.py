@@ -9,68 +9,29 @@ scheduler has its own tests).
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 
-from tests.regression.test_webhooks import Receiver
-from tests.service.conftest import LiveService, wait_for
-
-SCENE_NAME = "thin_film"
-
-
-def suite(light_radius_m: float = 0.006) -> dict[str, Any]:
-    scene = json.loads(
-        (Path(__file__).parents[2] / "schemas/examples/thin_film_sphere_light.json").read_text()
-    )
-    scene["film"]["bands"] = 8
-    scene["emitters"][0]["radius_m"] = light_radius_m
-    return {"scenes": [{"name": SCENE_NAME, "scene": scene, "spp": 8, "width": 16, "height": 16}]}
-
-
-class Client:
-    def __init__(self, service: LiveService) -> None:
-        self.http = httpx.Client(
-            base_url=service.base_url, headers={"Authorization": f"Bearer {service.admin_token}"}, timeout=30
-        )
-
-    def post(self, path: str, body: Any = None, expect: int = 200) -> Any:
-        response = self.http.post(path, json=body if body is not None else {})
-        assert response.status_code == expect, response.text
-        return response.json() if response.content else None
-
-    def get(self, path: str, expect: int = 200) -> Any:
-        response = self.http.get(path)
-        assert response.status_code == expect, response.text
-        return response.json()
-
-    def run_to_end(self, schedule_id: str) -> dict[str, Any]:
-        run = self.post(f"/v1/schedules/{schedule_id}/run", expect=202)
-        assert run["status"] == "running" and run["trigger"] == "manual"
-        return wait_for(
-            lambda: (r := self.get(f"/v1/runs/{run['id']}"))["status"] != "running" and r,
-            120,
-            f"run {run['id']} to finish",
-            interval_s=0.3,
-        )
+from tests.support.live_service import LiveService
+from tests.support.regression import SCENE_NAME, RegressionApi, suite
+from tests.support.webhooks import Receiver, running_receiver
 
 
 @pytest.fixture()
-def receiver() -> Any:
-    hook = Receiver(failures=1)  # the first delivery fails: the alert only arrives through a retry
-    hook.thread.start()
-    yield hook
-    hook.server.shutdown()
-    hook.server.server_close()
+def receiver() -> Iterator[Receiver]:
+    with running_receiver(failures=1) as hook:  # the first delivery fails: the alert arrives by a retry
+        yield hook
 
 
 def test_runs_pass_on_noise_fail_on_change_alert_and_promote(
     live_service: LiveService, receiver: Any
 ) -> None:
     live_service.start_worker(HGRENDER_REGRESSION_WEBHOOK_RETRY_INTERVALS_S="[0.2, 0.4]")
-    api = Client(live_service)
+    api = RegressionApi(live_service)
     reference = api.post("/v1/schedules", {"name": "ref", "interval_s": 86400, "suite": suite()}, expect=201)
 
     first = api.run_to_end(reference["id"])
@@ -112,7 +73,7 @@ def test_runs_pass_on_noise_fail_on_change_alert_and_promote(
 
 
 def test_schedule_lifecycle_and_validation(live_service: LiveService) -> None:
-    api = Client(live_service)
+    api = RegressionApi(live_service)
     created = api.post(
         "/v1/schedules",
         {"name": "nightly", "cron": "0 2 * * *", "timezone": "Europe/Berlin", "suite": suite()},
@@ -138,7 +99,7 @@ def test_schedule_lifecycle_and_validation(live_service: LiveService) -> None:
 
 
 def test_a_scene_that_cannot_render_is_refused_at_creation(live_service: LiveService) -> None:
-    api = Client(live_service)
+    api = RegressionApi(live_service)
     broken = suite()
     broken["scenes"][0]["scene"]["emitters"][0]["radius_m"] = -1.0
     response = api.http.post("/v1/schedules", json={"name": "broken", "interval_s": 60, "suite": broken})
@@ -146,11 +107,11 @@ def test_a_scene_that_cannot_render_is_refused_at_creation(live_service: LiveSer
 
 
 def test_other_owners_cannot_see_schedules(live_service: LiveService) -> None:
-    api = Client(live_service)
+    api = RegressionApi(live_service)
     created = api.post(
         "/v1/schedules", {"name": "private", "interval_s": 86400, "suite": suite()}, expect=201
     )
-    token = live_service.token("mallory")
+    token = live_service.new_token("mallory")
     response = httpx.get(
         f"{live_service.base_url}/v1/schedules/{created['id']}",
         headers={"Authorization": f"Bearer {token}"},
@@ -177,7 +138,7 @@ def test_regress_cli_against_the_service(
     common = ["--url", live_service.base_url, "--token", live_service.admin_token, "--timeout-s", "120"]
     # No baseline yet: the first run creates v1; --update-baseline promotes the run again (v2).
     assert main(["regress", str(reference), *common, "--update-baseline"]) == 0
-    assert Client(live_service).get("/v1/baselines/cli_thin_film")["current"] == 2
+    assert RegressionApi(live_service).get("/v1/baselines/cli_thin_film")["current"] == 2
     capsys.readouterr()
     assert main(["regress", str(reference), *common]) == 0
     assert f"{'cli_thin_film':<28} pass" in capsys.readouterr().out

@@ -11,9 +11,9 @@ from typing import Any
 
 import pytest
 
-from tests.regression.test_api import Client, suite
-from tests.service.conftest import LiveService
-from tests.web.conftest import screenshot, token_page
+from tests.support.browser import screenshot, token_page
+from tests.support.live_service import LiveService
+from tests.support.regression import RegressionApi, suite
 
 pytestmark = pytest.mark.browser
 
@@ -28,7 +28,7 @@ def page(live_service: LiveService, chromium: Any) -> Iterator[Any]:
 
 def test_dashboard_shows_schedules_trend_and_compare(live_service: LiveService, page: Any) -> None:
     live_service.start_worker()
-    api = Client(live_service)
+    api = RegressionApi(live_service)
     reference = api.post(
         "/v1/schedules", {"name": "reference", "interval_s": 86400, "suite": suite()}, expect=201
     )

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.regression.images import RenderOutputs
-from service.regression.metrics import compare_renders
-from service.regression.models import Thresholds
+from hgcore.regression.images import RenderOutputs
+from hgcore.regression.metrics import compare_renders
+from hgcore.regression.models import Thresholds
 
 SIZE_PX, BANDS, SPP = 16, 8, 8
 CENTERS_NM = 380.0 + 50.0 * (np.arange(BANDS) + 0.5)

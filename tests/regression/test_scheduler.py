@@ -19,12 +19,13 @@ from pathlib import Path
 import pytest
 import redis
 
+from hgcore.regression.models import ScheduleCreate, Suite, SuiteScene
+from hgcore.regression.store import RegressionStore
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
 from hgrender.cli.service import worker_command_line
 from service.redis_server import RedisServer
-from service.regression.models import ScheduleCreate, Suite, SuiteScene
-from service.regression.store import RegressionStore
+from tests.support.processes import wait_for
 
 INTERVAL_S = 2
 
@@ -87,10 +88,7 @@ def test_killed_leader_is_replaced_without_losing_or_duplicating_a_due_time(sett
     store, schedule_id, created_at = make_schedule(settings)
     leader = start_scheduler(settings, "sched-leader")
     try:
-        deadline = time.monotonic() + 30
-        while len(due_times(store, schedule_id)) < 2 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert len(due_times(store, schedule_id)) >= 2, "the leader never fired"
+        wait_for(lambda: len(due_times(store, schedule_id)) >= 2, 30, "the leader to fire", interval_s=0.05)
         # Kill it right after a due time, stay down past the next one, then start a replacement.
         stop(leader, kill=True)
         fired_before = len(due_times(store, schedule_id))
@@ -112,9 +110,7 @@ def test_pause_skips_due_times_and_resume_continues_on_the_grid(settings: Settin
     store, schedule_id, created_at = make_schedule(settings)
     scheduler = start_scheduler(settings, "sched-pause")
     try:
-        deadline = time.monotonic() + 30
-        while len(due_times(store, schedule_id)) < 1 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_for(lambda: due_times(store, schedule_id), 30, "the first due time", interval_s=0.05)
         store.set_paused(schedule_id, True)
         paused_at = time.time()
         time.sleep(1.0)  # the leader re-syncs within SYNC_INTERVAL_S = 1 s

@@ -8,7 +8,7 @@ from datetime import UTC, datetime
 import pytest
 from pydantic import ValidationError
 
-from service.regression.models import ScheduleCreate, ScheduleView, Suite, SuiteScene
+from hgcore.regression.models import ScheduleCreate, ScheduleView, Suite, SuiteScene
 from service.regression.scheduler import trigger_for
 
 SUITE = Suite(scenes=[SuiteScene(example="cornell_box")])

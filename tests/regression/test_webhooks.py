@@ -2,54 +2,20 @@
 
 from __future__ import annotations
 
-import json
-import threading
+import contextlib
 from collections.abc import Iterator
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
 import pytest
 
-from service.regression.webhooks import deliver_webhook
-
-
-class Receiver:
-    """Answers the first ``failures`` POSTs with 503, later ones with 204; records every body."""
-
-    def __init__(self, failures: int) -> None:
-        self.failures = failures
-        self.bodies: list[dict[str, Any]] = []
-        receiver = self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:
-                body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
-                receiver.bodies.append(body)
-                self.send_response(503 if len(receiver.bodies) <= receiver.failures else 204)
-                self.end_headers()
-
-            def log_message(self, *args: Any) -> None:
-                pass
-
-        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/hook"
-        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+from hgcore.regression.webhooks import deliver_webhook
+from tests.support.webhooks import running_receiver
 
 
 @pytest.fixture()
 def receiver_factory() -> Iterator[Any]:
-    started: list[Receiver] = []
-
-    def start(failures: int) -> Receiver:
-        receiver = Receiver(failures)
-        receiver.thread.start()
-        started.append(receiver)
-        return receiver
-
-    yield start
-    for receiver in started:
-        receiver.server.shutdown()
-        receiver.server.server_close()
+    with contextlib.ExitStack() as stack:
+        yield lambda failures: stack.enter_context(running_receiver(failures))
 
 
 def test_delivery_retries_after_the_receiver_first_fails(receiver_factory: Any) -> None:

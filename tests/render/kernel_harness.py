@@ -18,8 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from worker.render.api import as_scene, renderer_for
+from schemas import validate_scene
 from worker.render.bsdfs import IncidentCoherence
+from worker.render.chunks import renderer_for
 
 
 def probe_scene(material: dict[str, Any]) -> dict[str, Any]:
@@ -46,7 +47,7 @@ class KernelProbe:
     """The kernels of the probe material (index 0) of a one-material scene."""
 
     def __init__(self, material: dict[str, Any]) -> None:
-        renderer = renderer_for(as_scene(probe_scene(material)))
+        renderer = renderer_for(validate_scene(probe_scene(material)))
         self.mi = renderer.mi
         self.kernels = renderer.integrator.kernels
         self.material_index = 0

@@ -19,11 +19,16 @@ rendered from independent samples, so Var(m) = (1/P²) Σ_p Var(x̄_p):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from worker.render.scene_compiler import CompiledScene
+from schemas.validation import validate_scene
+from tests.render.exr import read_channels, spectral_stack
+from worker.mitsuba_setup import configured_mitsuba
+from worker.render.chunks import render_scene
+from worker.render.scene_compiler import CompiledScene, SceneCompiler
 
 
 @dataclass(frozen=True)
@@ -76,3 +81,30 @@ def path_band_means(mi: Any, compiled: CompiledScene, spp: int, seeds: list[int]
     scene = mi.load_dict(scene_dict, optimize=False)
     renders = np.stack([np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float64) for seed in seeds])
     return image_mean_with_error(renders.mean(axis=0), renders.var(axis=0, ddof=1) / len(seeds))
+
+
+PATH_SEEDS = list(range(8))
+MAX_RELATIVE_STANDARD_ERROR = 0.03
+
+
+def hg_band_means(scene: dict[str, Any], out_dir: Path, seed: int) -> BandMeans:
+    """Render with ``hg_path`` through the public API and read the band means and their SE from the EXRs."""
+    render_scene(validate_scene(scene), out_dir, seed=seed)
+    names, bands = spectral_stack(read_channels(out_dir / "image.exr"))
+    variance = read_channels(out_dir / "variance.exr")
+    variances = np.stack([variance[name] for name in names], axis=-1)
+    return image_mean_with_error(bands, variances)
+
+
+def assert_agreement(scene: dict[str, Any], out_dir: Path, path_spp: int) -> None:
+    mi = configured_mitsuba()
+    compiled = SceneCompiler(mi).compile(validate_scene(scene))
+    ours = hg_band_means(scene, out_dir, seed=11)
+    reference = path_band_means(mi, compiled, path_spp, PATH_SEEDS)
+    combined = np.sqrt(ours.standard_error**2 + reference.standard_error**2)
+    z_scores = (ours.mean - reference.mean) / combined
+    print("hg_path", ours.mean, "\npath   ", reference.mean, "\nz      ", np.round(z_scores, 2))
+    assert np.all(reference.mean > 0) and np.all(ours.mean > 0)
+    assert np.all(ours.standard_error <= MAX_RELATIVE_STANDARD_ERROR * ours.mean)
+    assert np.all(reference.standard_error <= MAX_RELATIVE_STANDARD_ERROR * reference.mean)
+    assert np.all(np.abs(z_scores) <= 3.0), f"bands beyond 3σ: z = {np.round(z_scores, 2)}"

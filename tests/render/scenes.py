@@ -2,18 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
-from schemas import EXAMPLES_DIR, build
-
-
-def example(name: str, **film: Any) -> dict[str, Any]:
-    """An example scene of ``schemas/examples`` with its ``film`` fields overridden."""
-    scene = json.loads((EXAMPLES_DIR / f"{name}.json").read_text())
-    scene["film"] = {**scene["film"], **film}
-    return scene
+from schemas import build
 
 
 def constant_spectrum(power_w: float) -> dict[str, Any]:

@@ -15,11 +15,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from schemas import validate_scene
 from tests.render.kernel_harness import KernelProbe, probe_scene
-from worker.render.api import as_scene, renderer_for
 from worker.render.bsdfs import IncidentCoherence, VertexSpectra
 from worker.render.bsdfs.common import ShadingPoint
 from worker.render.bsdfs.dispatch import MaterialKernels
+from worker.render.chunks import renderer_for
 
 MATERIALS = {
     "diffuse": {"type": "diffuse", "reflectance": 0.6},
@@ -169,7 +170,7 @@ def mixed_kernels() -> tuple[MaterialKernels, object, int]:
         {"type": "sphere", "center_m": [3.0 * i, 0, 0], "radius_m": 1.0, "material": name}
         for i, name in enumerate(MATERIALS)
     ]
-    renderer = renderer_for(as_scene(scene))
+    renderer = renderer_for(validate_scene(scene))
     return renderer.integrator.kernels, renderer.mi, len(MATERIALS)
 
 

@@ -1,6 +1,6 @@
 """The paper's experiments as assertions on small renders (issue 3: Figs. 7, 1(f), 8 and 9).
 
-Each test renders through the public API (``worker.render.api.render_scene``) and reads the EXRs back. The
+Each test renders through the public API (``worker.render.chunks.render_scene``) and reads the EXRs back. The
 fringe visibility V̂ of a thin film is fitted against the two-beam form of Eq. (18) (``tests.render.fringes``);
 "3σ" margins use the fit's standard errors. Scenes are in ``tests.render.scenes``; the figures printed by
 each test are the measured values quoted in the integrator report.
@@ -22,10 +22,11 @@ from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.coherence import degree_of_coherence
 from hgcore.optics.sources import source_coefficients, sphere_covariance_components
 from hgcore.optics.thin_film import film_shear
+from schemas import validate_scene
 from tests.render import scenes
 from tests.render.exr import read_channels, spectral_stack
 from tests.render.fringes import FringeFit, fit_fringe_visibility, two_beam_band_terms
-from worker.render.api import render_scene
+from worker.render.chunks import render_scene
 
 K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)
 
@@ -35,7 +36,7 @@ def band_edges_nm(bands: int, range_nm: tuple[float, float]) -> np.ndarray:
 
 
 def render(scene: dict[str, Any], out_dir: Path, seed: int = 1) -> dict[str, np.ndarray]:
-    render_scene(scene, out_dir, seed=seed)
+    render_scene(validate_scene(scene), out_dir, seed=seed)
     return read_channels(out_dir / "image.exr")
 
 

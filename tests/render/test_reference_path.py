@@ -13,43 +13,10 @@ be able to fail on a real bias of a few per cent.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-
-from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
-from tests.render.reference import BandMeans, image_mean_with_error, path_band_means
-from tests.render.scenes import example, mirror_room
-from worker.mitsuba_setup import load_mitsuba
-from worker.render.api import render_scene
-from worker.render.scene_compiler import SceneCompiler
-
-PATH_SEEDS = list(range(8))
-MAX_RELATIVE_STANDARD_ERROR = 0.03
-
-
-def hg_band_means(scene: dict[str, Any], out_dir: Path, seed: int) -> BandMeans:
-    """Render with ``hg_path`` through the public API and read the band means and their SE from the EXRs."""
-    render_scene(scene, out_dir, seed=seed)
-    names, bands = spectral_stack(read_channels(out_dir / "image.exr"))
-    variance = read_channels(out_dir / "variance.exr")
-    variances = np.stack([variance[name] for name in names], axis=-1)
-    return image_mean_with_error(bands, variances)
-
-
-def assert_agreement(scene: dict[str, Any], out_dir: Path, path_spp: int) -> None:
-    mi = load_mitsuba()
-    compiled = SceneCompiler(mi).compile(validate_scene(scene))
-    ours = hg_band_means(scene, out_dir, seed=11)
-    reference = path_band_means(mi, compiled, path_spp, PATH_SEEDS)
-    combined = np.sqrt(ours.standard_error**2 + reference.standard_error**2)
-    z_scores = (ours.mean - reference.mean) / combined
-    print("hg_path", ours.mean, "\npath   ", reference.mean, "\nz      ", np.round(z_scores, 2))
-    assert np.all(reference.mean > 0) and np.all(ours.mean > 0)
-    assert np.all(ours.standard_error <= MAX_RELATIVE_STANDARD_ERROR * ours.mean)
-    assert np.all(reference.standard_error <= MAX_RELATIVE_STANDARD_ERROR * reference.mean)
-    assert np.all(np.abs(z_scores) <= 3.0), f"bands beyond 3σ: z = {np.round(z_scores, 2)}"
+from tests.render.reference import assert_agreement
+from tests.render.scenes import mirror_room
+from tests.support.scenes import example
 
 
 def test_cornell_box_matches_path(tmp_path: Path) -> None:

@@ -25,8 +25,8 @@ from schemas.textures import check_scene_images
 from schemas.validation import validate_scene
 from tests.render.exr import read_channels, spectral_stack
 from tests.render.images import linear_to_srgb, write_image
-from worker.mitsuba_setup import load_mitsuba
-from worker.render.api import render_scene
+from worker.mitsuba_setup import configured_mitsuba
+from worker.render.chunks import render_scene
 from worker.render.scene_compiler import SceneCompiler
 from worker.render.textures import TextureKernels, TextureTable, coefficient_table, srgb_to_linear
 
@@ -74,7 +74,7 @@ def reference_lookup(values: np.ndarray, u: np.ndarray, v: np.ndarray, wrap: tup
 
 @pytest.fixture(scope="module")
 def mi() -> Any:
-    return load_mitsuba()
+    return configured_mitsuba()
 
 
 @pytest.mark.parametrize("wrap_u", ["repeat", "clamp", "mirror", "black"])
@@ -334,7 +334,7 @@ def test_texture_coordinates_of_every_source_have_their_origin_bottom_left(tmp_p
         {"type": "mesh_file", "path": "quad.ply"},
         {"type": "mesh_file", "path": "quad_st.ply"},
     ]  # fmt: skip
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     write_image(tmp_path / "t.png", np.zeros((2, 2, 3), np.uint8))
     for shape in shapes:
         scene = card_scene({"type": "diffuse", "reflectance": {"type": "image", "path": "t.png"}})
@@ -348,7 +348,7 @@ def test_texture_coordinates_of_every_source_have_their_origin_bottom_left(tmp_p
 
 
 def test_a_mesh_reads_the_uv_set_its_textures_name(tmp_path: Path) -> None:
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     write_image(tmp_path / "t.png", np.zeros((2, 2, 3), np.uint8))
     quad = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
     mesh = {"type": "mesh", "material": "card", "vertices_m": quad, "indices": [[0, 1, 2], [0, 2, 3]],
@@ -449,7 +449,7 @@ def test_a_textured_correlation_length_reads_the_propagating_fraction_of_its_rat
     write_image(tmp_path / "ell.exr", np.linspace(1.0, 6.0, 16, dtype=np.float32).reshape(1, 16, 1))
     material = {"type": "rough_conductor", "conductor": "Al", "roughness_rms_um": 0.1, "psd": "abc"}
     material["correlation_length_um"] = {"type": "image", "path": "ell.exr"}
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     renderer = Renderer(SceneCompiler(mi, tmp_path).compile(validate_scene(card_scene(material))))
     branch = next(b for b in renderer.integrator.kernels.branches if isinstance(b, RoughConductor))
     rng = np.random.default_rng(8)

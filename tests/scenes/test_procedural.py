@@ -187,10 +187,10 @@ def test_usd_round_trip_and_standard_mesh(name: str, tmp_path: Path) -> None:
 
 def test_renderer_tangent_on_the_optical_disc_is_radial() -> None:
     """A grating's vector follows the first shading tangent: radial on the disc = concentric tracks."""
-    from worker.mitsuba_setup import load_mitsuba
+    from worker.mitsuba_setup import configured_mitsuba
     from worker.render.scene_compiler import SceneCompiler
 
-    mi = load_mitsuba()
+    mi = configured_mitsuba()
     shape = OpticalDiscShape(type="optical_disc", material="m", center_m=[0, 0, 0], normal=[0, 1, 0])
     scene = mi.load_dict({"type": "scene", "disc": SceneCompiler(mi)._shape_dict(shape)})
     angles = np.linspace(0.1, 2 * math.pi, 7)

@@ -14,22 +14,23 @@ import pytest
 
 from service.auth import TokenRegistry
 from service.rate_limit import counter_key
-from tests.service.conftest import LiveService, http_get, tiny_scene
+from tests.support.live_service import LiveService
+from tests.support.scenes import tiny_scene
 
 
 def test_missing_and_invalid_tokens_are_401(live_service: LiveService) -> None:
-    assert http_get(live_service, "/v1/jobs").status_code == 401
-    response = http_get(live_service, "/v1/jobs", token="hgr_not-a-real-token")
+    assert live_service.get("/v1/jobs", token="").status_code == 401
+    response = live_service.get("/v1/jobs", token="hgr_not-a-real-token")
     assert response.status_code == 401
     assert response.json()["detail"].startswith("authorization:")
     assert response.headers["www-authenticate"] == "Bearer"
-    assert http_get(live_service, "/v1/jobs", token="garbage").status_code == 401
+    assert live_service.get("/v1/jobs", token="garbage").status_code == 401
 
 
 def test_owner_visibility_and_scopes(live_service: LiveService) -> None:
-    alice = live_service.client(live_service.token("alice"))
-    bob = live_service.client(live_service.token("bob"))
-    reader = live_service.client(live_service.token("carol", ("read",)))
+    alice = live_service.client(live_service.new_token("alice"))
+    bob = live_service.client(live_service.new_token("bob"))
+    reader = live_service.client(live_service.new_token("carol", ("read",)))
     job = alice.submit(tiny_scene(), chunks=1)
     assert alice.get(job["id"])["owner"] == "alice"
     # Bob can neither see nor cancel nor delete nor download Alice's job: indistinguishable from missing.
@@ -54,7 +55,7 @@ def test_owner_visibility_and_scopes(live_service: LiveService) -> None:
 
 
 def test_oversize_body_is_413_and_nothing_is_enqueued(live_service: LiveService) -> None:
-    token = live_service.token("big")
+    token = live_service.new_token("big")
     queued_before = live_service.redis.llen("rq:queue:default")
     padding = "x" * (live_service.settings.max_request_bytes + 10)
     response = httpx.post(
@@ -78,7 +79,7 @@ def test_oversize_body_is_413_and_nothing_is_enqueued(live_service: LiveService)
 
 
 def test_malformed_scene_is_422_naming_the_field_and_nothing_is_written(live_service: LiveService) -> None:
-    client = live_service.client(live_service.token("dave"))
+    client = live_service.client(live_service.new_token("dave"))
     store_root = live_service.settings.artifact_dir
     before = sorted(store_root.rglob("*")) if store_root.exists() else []
     scene = tiny_scene()
@@ -112,7 +113,7 @@ def test_malformed_scene_is_422_naming_the_field_and_nothing_is_written(live_ser
 
 
 def test_spp_override_is_validated_against_scene_limits(live_service: LiveService) -> None:
-    client = live_service.client(live_service.token("erin"))
+    client = live_service.client(live_service.new_token("erin"))
     response = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "spp": 10_000_000})
     assert response.status_code == 422
     assert response.json()["detail"].startswith("spp:") or "/film/spp" in response.json()["detail"]
@@ -124,7 +125,7 @@ def test_spp_override_is_validated_against_scene_limits(live_service: LiveServic
 
 
 def test_idempotency_key_returns_the_first_job(live_service: LiveService) -> None:
-    client = live_service.client(live_service.token("frank"))
+    client = live_service.client(live_service.new_token("frank"))
     first = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "idempotency_key": "nightly-1"})
     second = client.http.post("/v1/jobs", json={"scene": tiny_scene(), "idempotency_key": "nightly-1"})
     assert (first.status_code, second.status_code) == (202, 200)
@@ -134,7 +135,7 @@ def test_idempotency_key_returns_the_first_job(live_service: LiveService) -> Non
 def test_concurrent_requests_with_one_idempotency_key_make_one_job(live_service: LiveService) -> None:
     from concurrent.futures import ThreadPoolExecutor
 
-    token = live_service.token("fiona")
+    token = live_service.new_token("fiona")
 
     def submit(_: int) -> str:
         with live_service.client(token) as client:
@@ -147,7 +148,7 @@ def test_concurrent_requests_with_one_idempotency_key_make_one_job(live_service:
 
 
 def test_listing_filters_and_paginates(live_service: LiveService) -> None:
-    client = live_service.client(live_service.token("gina"))
+    client = live_service.client(live_service.new_token("gina"))
     ids = [client.submit(tiny_scene(), chunks=1)["id"] for _ in range(5)]
     client.cancel(ids[0])
     page = client.list(limit=2)
@@ -182,7 +183,7 @@ def test_tokens_are_stored_hashed_and_managed_by_admins(live_service: LiveServic
         harry.create_token("x", ["admin"])
     assert getattr(error.value, "status_code", None) == 403
     assert admin.http.delete(f"/v1/tokens/{created['id']}").status_code == 204
-    assert http_get(live_service, "/v1/jobs", token=created["token"]).status_code == 401
+    assert live_service.get("/v1/jobs", token=created["token"]).status_code == 401
 
 
 def test_rate_limit_answers_429(live_service: LiveService) -> None:
@@ -193,9 +194,9 @@ def test_rate_limit_answers_429(live_service: LiveService) -> None:
     window = int(time.time() // 60)
     live_service.redis.set(counter_key(info.id, window), limit - 1, ex=120)
     live_service.redis.set(counter_key(info.id, window + 1), limit - 1, ex=180)
-    statuses = [http_get(live_service, "/v1/jobs", token=secret).status_code for _ in range(2)]
+    statuses = [live_service.get("/v1/jobs", token=secret).status_code for _ in range(2)]
     assert statuses == [200, 429]
-    response = http_get(live_service, "/v1/jobs", token=secret)
+    response = live_service.get("/v1/jobs", token=secret)
     assert response.status_code == 429 and int(response.headers["retry-after"]) >= 1
 
 
@@ -206,7 +207,7 @@ def test_rate_limit_counts_reach_the_shared_counter(live_service: LiveService) -
     requests = 7
     windows = {int(time.time() // 60)}
     for _ in range(requests):
-        assert http_get(live_service, "/v1/jobs", token=secret).status_code == 200
+        assert live_service.get("/v1/jobs", token=secret).status_code == 200
     windows.add(int(time.time() // 60))  # the requests may straddle a minute boundary
 
     def shared_count() -> int:
@@ -221,25 +222,25 @@ def test_rate_limit_counts_reach_the_shared_counter(live_service: LiveService) -
     window = int(time.time() // 60)
     for w in (window, window + 1):
         live_service.redis.incrby(counter_key(info.id, w), limit)
-    assert http_get(live_service, "/v1/jobs", token=secret).status_code == 429
+    assert live_service.get("/v1/jobs", token=secret).status_code == 429
 
 
 def test_health_readiness_metrics_schema(live_service: LiveService) -> None:
-    assert http_get(live_service, "/healthz").json() == {"status": "ok"}
-    ready = http_get(live_service, "/readyz")  # no worker runs in these tests: not ready
+    assert live_service.get("/healthz", token="").json() == {"status": "ok"}
+    ready = live_service.get("/readyz", token="")  # no worker runs in these tests: not ready
     assert ready.status_code == 503
     assert ready.json()["checks"] == {
         "redis": "ok",
         "workers": "error: no queue worker is alive",
         "store": "ok",
     }
-    metrics = http_get(live_service, "/metrics").text
+    metrics = live_service.get("/metrics", token="").text
     assert 'hgrender_queue_depth{queue="default"}' in metrics
     assert 'hgrender_jobs{status="queued"}' in metrics
     assert "hgrender_api_request_duration_seconds_bucket" in metrics
-    schema = http_get(live_service, "/v1/schemas/scene", token=live_service.admin_token).json()
+    schema = live_service.get("/v1/schemas/scene", token=live_service.admin_token).json()
     assert "properties" in schema or "$defs" in schema
-    spec = http_get(live_service, "/openapi.json").json()
+    spec = live_service.get("/openapi.json", token="").json()
     assert {"/v1/jobs", "/v1/jobs/{job_id}/events", "/v1/coherence", "/metrics"} <= set(spec["paths"])
     references = set(re.findall(r'"\$ref": "#/components/schemas/([^"]+)"', json.dumps(spec)))
     assert references <= set(spec["components"]["schemas"]), references - set(spec["components"]["schemas"])
@@ -250,7 +251,7 @@ def test_health_readiness_metrics_schema(live_service: LiveService) -> None:
 def test_metrics_jobs_by_state_match_listing(live_service: LiveService) -> None:
     client = live_service.client()
     by_status = {s: client.list(status=s)["total"] for s in ("queued", "canceled")}
-    metrics = http_get(live_service, "/metrics").text
+    metrics = live_service.get("/metrics", token="").text
     for status, count in by_status.items():
         assert f'hgrender_jobs{{status="{status}"}} {count}' in metrics
 

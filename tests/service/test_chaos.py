@@ -28,11 +28,14 @@ import httpx
 import pytest
 import redis
 
-from hgcore.jobs.keys import chunks_key, job_key
+from hgcore.jobs.lifecycle import JobLifecycle
+from hgcore.jobs.status import TERMINAL_STATUSES
+from hgcore.store.filesystem import FilesystemStore
 from hgrender.client import HgrenderClient
 from service.redis_server import free_loopback_port
-from tests.service.conftest import children_of, describe_process, is_alive, tiny_scene, wait_for
-from tests.service.test_serve import redis_servers_in, start_serve, stop_serve
+from tests.support.processes import children_of, describe_process, is_alive, wait_for
+from tests.support.scenes import tiny_scene
+from tests.support.serve import redis_servers_in, start_serve, stop_serve
 
 pytestmark = pytest.mark.slow
 
@@ -69,6 +72,10 @@ class Chaos:
 
     def redis(self) -> redis.Redis:
         return redis.Redis.from_url(self._redis_url(), socket_connect_timeout=1)
+
+    def jobs(self) -> JobLifecycle:
+        """The jobs of the current private Redis (it moves when it restarts)."""
+        return JobLifecycle(self.redis(), FilesystemStore(self.data_dir / "artifacts"))
 
     def _redis_url(self) -> str:
         for proc_pid in redis_servers_in(self.data_dir / "redis"):
@@ -108,22 +115,17 @@ class Chaos:
         return None
 
     def _running_horses(self, job_ids: list[str]) -> list[int]:
-        client = self.redis()
+        jobs = self.jobs()
         pids: list[int] = []
         for job_id in job_ids:
-            fields = {k.decode(): v.decode() for k, v in client.hgetall(chunks_key(job_id)).items()}
-            running = [
-                key.removesuffix(".status")
-                for key, v in fields.items()
-                if key.endswith(".status") and v == "running"
-            ]
-            pids += [int(fields[f"{chunk}.pid"]) for chunk in running if fields.get(f"{chunk}.pid")]
+            steps = jobs.steps(job_id)
+            running = [*steps.chunks, *([steps.merge] if steps.merge is not None else [])]
+            pids += [step.pid for step in running if step.status == "running" and step.pid is not None]
         return pids
 
     def _unfinished(self, job_ids: list[str]) -> int:
-        client = self.redis()
-        statuses = [client.hget(job_key(j), "status") for j in job_ids]
-        return sum(s not in {b"succeeded", b"failed", b"canceled"} for s in statuses)
+        jobs = self.jobs()
+        return sum(jobs.status(j) not in TERMINAL_STATUSES for j in job_ids)
 
     def kill_horse(self, rng: random.Random, job_ids: list[str]) -> None:
         # Keep work in the queue so that a horse will run: when every submitted job has ended, the driver

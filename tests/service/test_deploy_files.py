@@ -8,7 +8,7 @@ import re
 import yaml
 
 from hgcore.settings import Settings
-from tests.service.conftest import REPO_ROOT
+from tests.support import REPO_ROOT
 
 
 def settings_env_names() -> set[str]:

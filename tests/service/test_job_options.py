@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.service.conftest import LiveService, http_get, tiny_scene
+from tests.support.live_service import LiveService
+from tests.support.scenes import tiny_scene
 
 
 @pytest.mark.parametrize(
@@ -30,7 +31,7 @@ from tests.service.conftest import LiveService, http_get, tiny_scene
 def test_bad_options_are_422_naming_the_field_and_nothing_is_enqueued(
     live_service: LiveService, options: dict, field: str
 ) -> None:
-    client = live_service.client(live_service.token("olga"))
+    client = live_service.client(live_service.new_token("olga"))
     before = client.list()["total"]
     response = client.http.post("/v1/jobs", json={"scene": tiny_scene(), **options})
     assert response.status_code == 422
@@ -39,7 +40,7 @@ def test_bad_options_are_422_naming_the_field_and_nothing_is_enqueued(
 
 
 def test_options_are_recorded_in_the_view(live_service: LiveService) -> None:
-    client = live_service.client(live_service.token("olga"))
+    client = live_service.client(live_service.new_token("olga"))
     job = client.submit(tiny_scene(spp=4), target_rel_error=0.05, target_quantile=0.9, integrator="rlt")
     view = client.get(job["id"])
     assert view["chunks_total"] == 1  # the server's default is 2 chunks; a target job renders as one
@@ -49,7 +50,7 @@ def test_options_are_recorded_in_the_view(live_service: LiveService) -> None:
     fixed = client.submit(tiny_scene())["id"]
     assert client.get(fixed)["noise_target"] is None
     # The integrator is written into the stored scene (what the worker renders).
-    scene = json.loads(live_service.redis.get(f"hgrender:job:{job['id']}:scene"))
+    scene = live_service.jobs.scene(job["id"])
     assert scene["film"]["integrator"] == "rlt"
     for job_id in (job["id"], fixed):  # no worker of a later test may find them queued
         client.cancel(job_id)
@@ -58,7 +59,7 @@ def test_options_are_recorded_in_the_view(live_service: LiveService) -> None:
 def test_a_worker_renders_the_integrator_and_meets_the_noise_target(
     live_service: LiveService, tmp_path: Path
 ) -> None:
-    client = live_service.client(live_service.token("olga"))
+    client = live_service.client(live_service.new_token("olga"))
     rlt = client.submit(tiny_scene(spp=2), integrator="rlt")["id"]
     target = client.submit(tiny_scene(spp=2), target_rel_error=0.05)["id"]
     live_service.start_worker("options")
@@ -93,7 +94,7 @@ def test_a_noise_target_job_publishes_its_image_after_each_round_while_it_runs(
     in rounds of 2, 18, 162, 1458, … spp (8× growth cap). The job's event stream sends the view after
     each published round (the first always; later ones once the render since outlasts 10× the last
     publication: here at least the 1458-spp round's), and the preview is read over HTTP right then."""
-    token = live_service.token("pia")
+    token = live_service.new_token("pia")
     client = live_service.client(token)
     job_id = client.submit(tiny_scene(spp=2), target_rel_error=0.005)["id"]
     observed: dict[int, float] = {}  # round count → achieved error the running job's view showed
@@ -110,7 +111,7 @@ def test_a_noise_target_job_publishes_its_image_after_each_round_while_it_runs(
             if rounds:
                 assert block["stop_reason"] is None and block["spp"] == rounds[-1]["spp"]
                 observed[len(rounds)] = block["achieved_rel_error"]
-                layers = http_get(live_service, f"/v1/jobs/{job_id}/layers", token)
+                layers = live_service.get(f"/v1/jobs/{job_id}/layers", token=token)
                 if layers.status_code == 200 and layers.json()["partial"]:
                     previews.append((len(rounds), layers.json()["spp"]))
         final = client.get(job_id)
@@ -134,7 +135,7 @@ def test_a_noise_target_job_publishes_its_image_after_each_round_while_it_runs(
     for count, spp in previews:
         assert spp in round_spp[count - 1 : -1], (count, spp, round_spp)
     # Once succeeded, the final image replaces it; the rounds' partial is gone from the artifacts.
-    done = http_get(live_service, f"/v1/jobs/{job_id}/layers", token).json()
+    done = live_service.get(f"/v1/jobs/{job_id}/layers", token=token).json()
     assert done["partial"] is False and done["spp"] is None
     client.download(job_id, "manifest.json", tmp_path / "manifest.json")
     names = [a["name"] for a in json.loads((tmp_path / "manifest.json").read_text())["artifacts"]]

@@ -5,16 +5,17 @@ artifacts, the SSE media type, an example for every request body."""
 
 from __future__ import annotations
 
-from pathlib import Path
+import contextlib
+from collections.abc import Iterator
 from typing import Any
 from urllib.parse import urlsplit
 
 import httpx
 import pytest
 
-from tests.service.conftest import LiveService
+from tests.support.browser import screenshot
+from tests.support.live_service import LiveService
 
-ARTIFACTS_DIR = Path(__file__).resolve().parents[2] / "test-artifacts"
 LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "::1"}
 
 
@@ -26,8 +27,10 @@ def operations(document: dict[str, Any]) -> list[tuple[str, str, dict[str, Any]]
     ]
 
 
-def open_offline(chromium: Any, url: str) -> tuple[Any, Any, list[str]]:
-    """A page at ``url`` whose non-loopback requests are aborted (and recorded)."""
+@contextlib.contextmanager
+def offline_page(chromium: Any, url: str, screenshot_name: str) -> Iterator[tuple[Any, list[str]]]:
+    """A page at ``url`` whose non-loopback requests are aborted and recorded: (page, the blocked URLs).
+    A screenshot is taken when the block ends (``test-artifacts/<screenshot_name>.png``)."""
     context = chromium.new_context(viewport={"width": 1400, "height": 900})
     blocked: list[str] = []
 
@@ -39,42 +42,36 @@ def open_offline(chromium: Any, url: str) -> tuple[Any, Any, list[str]]:
             handle.abort()
 
     context.route("**/*", route)
-    page = context.new_page()
-    page.goto(url)
-    return context, page, blocked
+    try:
+        page = context.new_page()
+        page.goto(url)
+        yield page, blocked
+        screenshot(page, screenshot_name)
+    finally:
+        context.close()
 
 
 @pytest.mark.browser
 def test_swagger_ui_renders_every_operation_offline(live_service: LiveService, chromium: Any) -> None:
     document = httpx.get(live_service.base_url + "/openapi.json", timeout=30).json()
-    context, page, blocked = open_offline(chromium, live_service.base_url + "/docs")
-    try:
+    with offline_page(chromium, live_service.base_url + "/docs", "docs-swagger-offline") as (page, blocked):
         page.wait_for_selector(".opblock", timeout=30_000)
         assert page.locator(".opblock").count() == len(operations(document))
         assert page.locator(".opblock-summary-path", has_text="/v1/jobs/{job_id}/events").count() == 1
         assert page.locator(".info .title").inner_text().startswith("hgrender")
-        ARTIFACTS_DIR.mkdir(exist_ok=True)
-        page.screenshot(path=str(ARTIFACTS_DIR / "docs-swagger-offline.png"))
-    finally:
-        context.close()
     assert blocked == []  # nothing was even requested from outside
 
 
 @pytest.mark.browser
 def test_redoc_renders_every_operation_offline(live_service: LiveService, chromium: Any) -> None:
     document = httpx.get(live_service.base_url + "/openapi.json", timeout=30).json()
-    context, page, blocked = open_offline(chromium, live_service.base_url + "/redoc")
-    try:
+    with offline_page(chromium, live_service.base_url + "/redoc", "docs-redoc-offline") as (page, blocked):
         page.wait_for_selector("[data-section-id*='/operation/']", timeout=30_000)
         sections = page.eval_on_selector_all(
             "[data-section-id*='/operation/']", "nodes => nodes.map(n => n.dataset.sectionId)"
         )
         ids = {section.rsplit("/operation/", 1)[1] for section in sections}
         assert ids == {operation["operationId"] for _, _, operation in operations(document)}
-        ARTIFACTS_DIR.mkdir(exist_ok=True)
-        page.screenshot(path=str(ARTIFACTS_DIR / "docs-redoc-offline.png"))
-    finally:
-        context.close()
     # ReDoc's bundle hard-codes its "API docs by Redocly" footer logo to its CDN (no option turns it
     # off); that image is all it asks the outside for, and the page works without it.
     assert all(url == "https://cdn.redoc.ly/redoc/logo-mini.svg" for url in blocked), blocked

@@ -18,16 +18,13 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
-from hgcore.store import store_from_settings
 from hgrender.client import HgrenderClient
-from service.jobs import JobService
-from tests.service.conftest import EXAMPLES_DIR, LiveService, tiny_scene, wait_for
+from schemas import EXAMPLES_DIR, validate_scene
+from tests.support.live_service import LiveService
+from tests.support.processes import wait_for
+from tests.support.scenes import tiny_scene
 
 pytestmark = pytest.mark.slow
-
-
-def job_service(service: LiveService) -> JobService:
-    return JobService(service.redis, store_from_settings(service.settings), service.settings)
 
 
 def long_scene(spp: int) -> dict[str, Any]:
@@ -57,7 +54,7 @@ def two_workers(live_service: LiveService) -> LiveService:
 
 def test_example_scenes_end_to_end(two_workers: LiveService, tmp_path: Path) -> None:
     service = two_workers
-    client = service.client(service.token("eve"))
+    client = service.client(service.new_token("eve"))
     names = sorted(p.name for p in EXAMPLES_DIR.glob("*.json"))
     assert names, "no example scenes"
     jobs = {name: client.submit(tiny_scene(name), chunks=2)["id"] for name in names}
@@ -88,7 +85,7 @@ def test_four_chunk_job_equals_local_split_render(two_workers: LiveService, tmp_
     """The service's 4-chunk merge and ``render_scene(..., chunks=4)`` use the same plan (spp split and
     seeds) and the same arithmetic (each chunk's sums rounded to float32 once, added in float64 in chunk
     order, tile by tile), so their images are bitwise equal."""
-    from worker.render.api import render_scene
+    from worker.render.chunks import render_scene
 
     client = two_workers.client()
     scene = tiny_scene(spp=8)
@@ -97,7 +94,7 @@ def test_four_chunk_job_equals_local_split_render(two_workers: LiveService, tmp_
     assert final["status"] == "succeeded" and final["chunks_total"] == 4
     assert {c["spp"] for c in final["chunks"]} == {2}
     client.download(job_id, "image.exr", tmp_path / "service.exr")
-    render_scene(scene, tmp_path / "local", chunks=4)
+    render_scene(validate_scene(scene), tmp_path / "local", chunks=4)
     service_image, local_image = (
         read_exr(tmp_path / "service.exr"),
         read_exr(tmp_path / "local" / "image.exr"),
@@ -129,8 +126,7 @@ def test_cancel_stops_a_running_render_within_5_s(two_workers: LiveService) -> N
     client = two_workers.client()
     job_id = client.submit(long_scene(spp=32768), chunks=1)["id"]
     wait_until_rendering(client, job_id)
-    jobs = job_service(two_workers)
-    horse_pid = int(jobs.chunk_fields(job_id)["0.pid"])
+    horse_pid = two_workers.steps(job_id).chunks[0].pid
     canceled_at = time.monotonic()
     assert client.cancel(job_id)["status"] == "canceled"
     wait_for(lambda: not Path(f"/proc/{horse_pid}").exists(), 5.0, "the work horse to stop")
@@ -138,7 +134,7 @@ def test_cancel_stops_a_running_render_within_5_s(two_workers: LiveService) -> N
     time.sleep(1.0)
     view = client.get(job_id)
     assert view["status"] == "canceled"
-    assert jobs.chunk_completions(job_id) == {}
+    assert two_workers.steps(job_id).completions() == {}
     assert not [a for a in client.artifacts(job_id) if a["name"].startswith(("chunks/", "image"))]
 
 
@@ -147,7 +143,7 @@ def _assert_succeeded_exactly_once(
 ) -> dict[str, Any]:
     final = client.wait(job_id, timeout_s=120)
     assert final["status"] == "succeeded", final.get("error")
-    completions = job_service(service).chunk_completions(job_id)
+    completions = service.steps(job_id).completions()
     assert completions == {**{str(i): 1 for i in range(final["chunks_total"])}, "merge": 1}
     names = [a["name"] for a in client.artifacts(job_id)]
     assert len(names) == len(set(names))
@@ -164,7 +160,7 @@ def test_sigkill_of_the_work_horse_retries_the_chunk(two_workers: LiveService) -
     client = two_workers.client()
     job_id = client.submit(long_scene(spp=2048), chunks=1)["id"]
     wait_until_rendering(client, job_id)
-    horse_pid = int(job_service(two_workers).chunk_fields(job_id)["0.pid"])
+    horse_pid = two_workers.steps(job_id).chunks[0].pid
     os.kill(horse_pid, signal.SIGKILL)
     final = _assert_succeeded_exactly_once(two_workers, client, job_id)
     assert final["chunks"][0]["attempts"] == 2
@@ -182,15 +178,14 @@ def test_sigkill_of_a_whole_worker_is_detected_and_retried(live_service: LiveSer
     client = service.client()
     # ~6 s a chunk: the victim is still rendering when it is killed after its first heartbeat tick.
     job_id = client.submit(long_scene(spp=8192), chunks=2)["id"]
-    jobs = job_service(service)
 
     def victim_chunk() -> str | None:
-        fields = jobs.chunk_fields(job_id)
-        return next((i for i in ("0", "1") if fields.get(f"{i}.worker") == "victim"), None)
+        chunks = service.steps(job_id).chunks
+        return next((str(i) for i, chunk in enumerate(chunks) if chunk.worker == "victim"), None)
 
     index = wait_for(victim_chunk, 60, "the victim to take a chunk")
-    wait_for(lambda: float(jobs.chunk_fields(job_id).get(f"{index}.progress", 0)) > 0, 60, "victim rendering")
-    horse_pid = int(jobs.chunk_fields(job_id)[f"{index}.pid"])
+    wait_for(lambda: service.steps(job_id).chunks[int(index)].progress > 0, 60, "victim rendering")
+    horse_pid = service.steps(job_id).chunks[int(index)].pid
     time.sleep(1.5)  # past the victim's first heartbeat tick (monitoring interval 1 s) while it is busy
     os.killpg(victim.pid, signal.SIGKILL)  # the worker and its scheduler child
     os.kill(horse_pid, signal.SIGKILL)  # the horse runs in its own process group
@@ -208,30 +203,33 @@ def test_sigkill_of_a_whole_worker_is_detected_and_retried(live_service: LiveSer
     service.stop_workers()
 
 
-def _kill_horse_of_attempt(jobs: JobService, job_id: str, attempt: int) -> None:
+def _kill_horse_of_attempt(service: LiveService, job_id: str, attempt: int) -> None:
     """Wait until attempt ``attempt`` of the one-chunk job renders, then SIGKILL its work horse."""
     wait_for(
-        lambda: (
-            (f := jobs.chunk_fields(job_id)).get("0.attempts") == str(attempt)
-            and float(f.get("0.progress", 0)) > 0
-        ),
+        lambda: (chunk := service.steps(job_id).chunks[0]).attempts == attempt and chunk.progress > 0,
         60,
         f"attempt {attempt} to render",
     )
-    os.kill(int(jobs.chunk_fields(job_id)["0.pid"]), signal.SIGKILL)
+    os.kill(service.steps(job_id).chunks[0].pid, signal.SIGKILL)
+
+
+def _one_chunk_job_whose_horses_die(service: LiveService, worker_name: str, attempts: int) -> tuple[Any, str]:
+    """A fresh worker ``worker_name`` and a long one-chunk job whose first ``attempts`` horses are killed;
+    (the worker's process, the job id)."""
+    service.stop_workers()
+    worker = service.start_worker(worker_name)
+    job_id = service.admin.submit(long_scene(spp=4096), chunks=1)["id"]
+    for attempt in range(1, 1 + attempts):
+        _kill_horse_of_attempt(service, job_id, attempt)
+    return worker, job_id
 
 
 def test_a_one_chunk_job_whose_horse_dies_on_every_attempt_fails(live_service: LiveService) -> None:
     """The step that renders and merges a one-chunk job cannot report its own death: the worker fails the
     job when the last retry's horse dies, and stays up."""
     service = live_service
-    service.stop_workers()
-    worker = service.start_worker("k1")
+    worker, job_id = _one_chunk_job_whose_horses_die(service, "k1", 1 + service.settings.chunk_retry_max)
     client = service.client()
-    job_id = client.submit(long_scene(spp=4096), chunks=1)["id"]
-    jobs = job_service(service)
-    for attempt in range(1, 2 + service.settings.chunk_retry_max):
-        _kill_horse_of_attempt(jobs, job_id, attempt)
     final = client.wait(job_id, timeout_s=60)
     assert final["status"] == "failed"
     assert final["error"].startswith(f"render and merge job {job_id}: Work-horse terminated unexpectedly")
@@ -245,16 +243,11 @@ def test_a_one_chunk_job_whose_worker_dies_on_the_last_attempt_fails(live_servic
     """Horses killed on the first attempts, then the whole worker on the last: another worker's maintenance
     pass finds the abandoned step (heartbeat 1 + 3 s) and fails the job instead of leaving it running."""
     service = live_service
-    service.stop_workers()
-    victim = service.start_worker("victim")
+    victim, job_id = _one_chunk_job_whose_horses_die(service, "victim", service.settings.chunk_retry_max)
     client = service.client()
-    job_id = client.submit(long_scene(spp=4096), chunks=1)["id"]
-    jobs = job_service(service)
-    for attempt in range(1, 1 + service.settings.chunk_retry_max):
-        _kill_horse_of_attempt(jobs, job_id, attempt)
     last = 1 + service.settings.chunk_retry_max
-    wait_for(lambda: jobs.chunk_fields(job_id).get("0.attempts") == str(last), 60, "the last attempt")
-    horse_pid = int(jobs.chunk_fields(job_id)["0.pid"])
+    wait_for(lambda: service.steps(job_id).chunks[0].attempts == last, 60, "the last attempt")
+    horse_pid = service.steps(job_id).chunks[0].pid
     os.killpg(victim.pid, signal.SIGKILL)
     os.kill(horse_pid, signal.SIGKILL)
     victim.wait()
@@ -270,16 +263,15 @@ def test_a_one_chunk_job_whose_worker_dies_on_the_last_attempt_fails(live_servic
 
 def test_two_workers_drain_20_jobs_without_running_any_twice(live_service: LiveService) -> None:
     service = live_service
-    service.stop_workers()
+    job_ids = service.backlog(20, tiny_scene(size_px=8, spp=1), chunks=1)
     client = service.client()
-    job_ids = [client.submit(tiny_scene(size_px=8, spp=1), chunks=1)["id"] for _ in range(20)]
     service.start_worker("d1")
     service.start_worker("d2")
-    jobs = job_service(service)
     for job_id in job_ids:
         assert client.wait(job_id, timeout_s=120)["status"] == "succeeded"
-        assert jobs.chunk_completions(job_id) == {"0": 1, "merge": 1}
-        assert jobs.chunk_fields(job_id)["0.attempts"] == "1"
+        steps = service.steps(job_id)
+        assert steps.completions() == {"0": 1, "merge": 1}
+        assert steps.chunks[0].attempts == 1
     workers = {w for job_id in job_ids for w in client.get(job_id)["workers"]}
     assert workers == {"d1", "d2"}
     service.stop_workers()

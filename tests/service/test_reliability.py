@@ -21,9 +21,9 @@ from rq.scheduler import RQScheduler
 
 from hgcore.jobs.queue_graph import chunk_rq_id, merge_rq_id
 from hgcore.jobs.reconcile import QueueReconciler
-from hgcore.store import store_from_settings
-from service.jobs import JobService
-from tests.service.conftest import LiveService, children_of, http_get, is_alive, tiny_scene, wait_for
+from tests.support.live_service import LiveService
+from tests.support.processes import children_of, is_alive, wait_for
+from tests.support.scenes import tiny_scene
 
 
 def post_job(service: LiveService, body: Any, **kwargs: Any) -> httpx.Response:
@@ -147,7 +147,7 @@ def test_job_options_are_strict_like_the_scene(live_service: LiveService) -> Non
 
 
 def _five_xx_for_jobs(service: LiveService) -> float:
-    metrics = http_get(service, "/metrics").text
+    metrics = service.get("/metrics", token="").text
     return sum(
         float(line.rsplit(" ", 1)[1])
         for line in metrics.splitlines()
@@ -169,7 +169,9 @@ def test_a_client_hanging_up_mid_body_is_no_server_error(live_service: LiveServi
             )
             time.sleep(0.2)
     wait_for(
-        lambda: 'status="4xx"' in http_get(live_service, "/metrics").text, 10, "the disconnects to be counted"
+        lambda: 'status="4xx"' in live_service.get("/metrics", token="").text,
+        10,
+        "the disconnects to be counted",
     )
     time.sleep(0.5)
     assert _five_xx_for_jobs(live_service) == before
@@ -187,8 +189,8 @@ def test_reconciliation_requeues_stranded_and_lost_chunks(live_service: LiveServ
     """Stranded states a Redis restart or a crash between two steps can leave: a chunk whose RQ job is
     gone, one marked queued in no queue, a merge deferred after its chunks ended. All come back."""
     service = live_service
-    jobs = JobService(service.redis, store_from_settings(service.settings), service.settings)
-    reconciler = QueueReconciler(service.redis, service.settings)
+    jobs = service.jobs
+    reconciler = QueueReconciler(jobs.lifecycle, service.settings)
     job_id = service.client().submit(tiny_scene(), chunks=3)["id"]
     assert reconciler.stranded_rq_jobs() == {}
     service.redis.lrem("rq:queue:default", 0, chunk_rq_id(job_id, 1))  # queued, but in no queue
@@ -232,15 +234,13 @@ def test_reconciliation_requeues_stranded_and_lost_chunks(live_service: LiveServ
 @pytest.mark.slow
 def test_merges_run_ahead_of_the_backlog_so_jobs_finish_in_order(live_service: LiveService) -> None:
     service = live_service
-    service.stop_workers()
+    job_ids = service.backlog(5, tiny_scene(size_px=8, spp=2), chunks=2)
     client = service.client()
-    job_ids = [client.submit(tiny_scene(size_px=8, spp=2), chunks=2)["id"] for _ in range(5)]
     service.start_worker("ordered")
     finals = [client.wait(job_id, timeout_s=120) for job_id in job_ids]
     assert all(f["status"] == "succeeded" for f in finals)
-    jobs = JobService(service.redis, store_from_settings(service.settings), service.settings)
     for earlier, later in itertools.pairwise(finals):
-        later_chunks_started = min(float(jobs.chunk_fields(later["id"])[f"{i}.started_at"]) for i in range(2))
+        later_chunks_started = min(chunk.started_at for chunk in service.steps(later["id"]).chunks)
         # One worker: job k's merge ran before any chunk of job k + 1 (it used to wait for the whole backlog).
         assert earlier["timings"]["finished_at"] < later_chunks_started
     service.stop_workers()
@@ -288,14 +288,11 @@ def test_a_dead_workers_chunk_reruns_within_30_s_with_default_timing(live_servic
         "HGRENDER_CHUNK_RETRY_INTERVALS_S": json.dumps(defaults.chunk_retry_intervals_s),
     }
     client = service.client()
-    jobs = JobService(service.redis, store_from_settings(service.settings), service.settings)
 
     def rendering_on(worker: str) -> str:
         job_id = client.submit(tiny_scene(size_px=64, spp=32768), chunks=1)["id"]
         wait_for(
-            lambda: (
-                (f := jobs.chunk_fields(job_id)).get("0.worker") == worker and float(f.get("0.progress", 0))
-            ),
+            lambda: (chunk := service.steps(job_id).chunks[0]).worker == worker and chunk.progress > 0,
             60,
             f"{worker} to render",
         )
@@ -308,7 +305,7 @@ def test_a_dead_workers_chunk_reruns_within_30_s_with_default_timing(live_servic
     long_running = rendering_on("busy")
     service.start_worker("survivor", **timing)
     try:
-        _kill_and_measure(service, victim, jobs, abandoned, long_running, defaults)
+        _kill_and_measure(service, victim, abandoned, long_running, defaults)
     finally:  # leave no long render to the next test's workers
         client.cancel(abandoned)
         client.cancel(long_running)
@@ -316,32 +313,32 @@ def test_a_dead_workers_chunk_reruns_within_30_s_with_default_timing(live_servic
 
 
 def _kill_and_measure(
-    service: LiveService, victim: Any, jobs: JobService, abandoned: str, long_running: str, defaults: Any
+    service: LiveService, victim: Any, abandoned: str, long_running: str, defaults: Any
 ) -> None:
     """SIGKILL the victim (and its horse) rendering ``abandoned``; assert the rerun within 30 s and that
     ``long_running`` keeps its first attempt."""
-    horse_pid = int(jobs.chunk_fields(abandoned)["0.pid"])
+    horse_pid = service.steps(abandoned).chunks[0].pid
     killed_at = time.time()
     os.killpg(victim.pid, signal.SIGKILL)
     os.kill(horse_pid, signal.SIGKILL)
     victim.wait()
     restarted_at = wait_for(
-        lambda: (f := jobs.chunk_fields(abandoned)).get("0.attempts") == "2" and float(f["0.started_at"]),
+        lambda: (chunk := service.steps(abandoned).chunks[0]).attempts == 2 and chunk.started_at,
         60,
         "the chunk to rerun",
     )
     recovery_s = restarted_at - killed_at
     print(f"dead-worker recovery: {recovery_s:.1f} s")
     assert recovery_s <= 30.0
-    assert jobs.chunk_fields(abandoned)["0.worker"] == "survivor"
+    assert service.steps(abandoned).chunks[0].worker == "survivor"
     # No false positive on the live one, also once it has run for longer than the heartbeat TTL (5 + 10 s).
     ttl_s = defaults.worker_monitoring_interval_s + defaults.worker_heartbeat_grace_s
-    started_at = float(jobs.chunk_fields(long_running)["0.started_at"])
+    started_at = service.steps(long_running).chunks[0].started_at
     wait_for(
         lambda: time.time() - started_at > ttl_s + defaults.worker_maintenance_interval_s, 60, "a long run"
     )
-    fields = jobs.chunk_fields(long_running)
-    assert fields["0.attempts"] == "1" and fields["0.status"] == "running"
+    chunk = service.steps(long_running).chunks[0]
+    assert chunk.attempts == 1 and chunk.status == "running"
 
 
 @pytest.mark.slow

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.service.conftest import LiveService
+from tests.support.live_service import LiveService
 
 pytestmark = pytest.mark.slow
 

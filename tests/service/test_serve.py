@@ -8,59 +8,19 @@ import json
 import os
 import signal
 import stat
-import subprocess
-import sys
 from pathlib import Path
 
-import httpx
 import pytest
 
 from hgrender.cli import main as hgrender_main
 from hgrender.client import HgrenderClient
-from service.redis_server import free_loopback_port, servers_working_in
-from tests.service.conftest import EXAMPLES_DIR, children_of, is_alive, tiny_scene, wait_for
+from schemas import EXAMPLES_DIR
+from service.redis_server import free_loopback_port
+from tests.support.processes import children_of, is_alive, wait_for
+from tests.support.scenes import tiny_scene
+from tests.support.serve import redis_servers_in, start_serve, stop_serve
 
 pytestmark = pytest.mark.slow
-
-
-def start_serve(
-    data_dir: Path, port: int, workers: int, extra_env: dict[str, str] | None = None
-) -> subprocess.Popen[bytes]:
-    env = {k: v for k, v in os.environ.items() if k != "REDIS_URL" and not k.startswith("HGRENDER_")}
-    env |= extra_env or {}
-    command = [
-        sys.executable,
-        "-c",
-        "import sys; from hgrender.cli import main; sys.exit(main())",
-        "serve",
-        "--port",
-        str(port),
-        "--data-dir",
-        str(data_dir),
-        "--workers",
-        str(workers),
-    ]
-    log = (data_dir.parent / f"serve-{port}.log").open("ab")
-    # Its own process group, as a shell runs a foreground command (a terminal's Ctrl-C signals the group).
-    process = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-
-    def ready() -> bool:
-        if process.poll() is not None:
-            pytest.fail(f"hgrender serve exited: {(data_dir.parent / f'serve-{port}.log').read_text()}")
-        try:
-            response = httpx.get(f"http://127.0.0.1:{port}/readyz", timeout=1)
-        except httpx.HTTPError:
-            return False
-        # Without workers the service never becomes ready; its API answering is what this waits for.
-        return response.status_code == 200 or (workers == 0 and response.json()["checks"]["redis"] == "ok")
-
-    wait_for(ready, 60, "hgrender serve to become ready", interval_s=0.2)
-    return process
-
-
-def stop_serve(process: subprocess.Popen[bytes]) -> None:
-    process.send_signal(signal.SIGTERM)
-    process.wait(timeout=60)
 
 
 def test_serve_restart_keeps_queued_jobs_and_cli_works(
@@ -114,11 +74,6 @@ def test_serve_restart_keeps_queued_jobs_and_cli_works(
         stop_serve(second)
     # Both serve runs stopped their private Redis (a redis-server's working directory is its data dir).
     assert wait_for(lambda: not redis_servers_in(data_dir / "redis"), 10, "the private Redis to stop")
-
-
-def redis_servers_in(directory: Path) -> list[int]:
-    """PIDs of redis-server processes working in ``directory``."""
-    return servers_working_in(directory)
 
 
 def test_a_sigkilled_serve_leaves_no_worker_and_its_redis_is_replaced(tmp_path: Path) -> None:

@@ -20,75 +20,32 @@ import pytest
 from PIL import Image
 
 from hgcore.imaging import auto_exposure_ev, display_rgb8
-from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, screenshot
+from tests.support.browser import canvas_rgb, drawn_count, redrawn, screenshot, viridis8
+from tests.support.live_service import LiveService, RenderedJob
+from tests.support.scenes import CYLINDER_SIZE_PX, cylinder_scene
 
 pytestmark = pytest.mark.browser
 
-# Matt Zucker's polynomial fit of viridis, as in web/js/colormap.js (the canvas must show exactly it).
-VIRIDIS = np.array(
-    [
-        [0.2777273272234177, 0.005407344544966578, 0.3340998053353061],
-        [0.1050930431085774, 1.404613529898575, 1.384590162594685],
-        [-0.3308618287255563, 0.214847559468213, 0.09509516302823659],
-        [-4.634230498983486, -5.799100973351585, -19.33244095627987],
-        [6.228269936347081, 14.17993336680509, 56.69055260068105],
-        [4.776384997670288, -13.74514537774601, -65.35303263337234],
-        [-5.435455855934631, 4.645852612178535, 26.3124352495832],
-    ]
-)
 
-
-def viridis8(t: np.ndarray) -> np.ndarray:
-    t = np.clip(np.nan_to_num(t), 0.0, 1.0)[..., None]
-    value = np.zeros((*t.shape[:-1], 3)) + VIRIDIS[6]
-    for k in range(5, -1, -1):
-        value = VIRIDIS[k] + t * value
-    return np.floor(np.clip(value, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
-
-
-def canvas_rgb(page: Any, selector: str = "#image-canvas") -> np.ndarray:
-    """The canvas's pixels (H, W, 3) as 8-bit values."""
-    data = page.evaluate(
-        """(selector) => {
-            const canvas = document.querySelector(selector);
-            const pixels = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height);
-            return {width: canvas.width, height: canvas.height, data: Array.from(pixels.data)};
-        }""",
-        selector,
-    )
-    rgba = np.array(data["data"], dtype=np.int64).reshape(data["height"], data["width"], 4)
-    return rgba[..., :3]
-
-
-def open_viewer(page: Any, served: Served, job_id: str) -> None:
-    page.goto(f"{served.base_url}/#/view/{job_id}")
+def open_viewer(page: Any, live_service: LiveService, job_id: str) -> None:
+    page.goto(f"{live_service.base_url}/#/view/{job_id}")
     page.wait_for_function("() => Number(document.querySelector('#image-canvas').dataset.drawn) >= 1")
 
 
-def redrawn(page: Any, count_before: int) -> None:
-    page.wait_for_function(
-        "(n) => Number(document.querySelector('#image-canvas').dataset.drawn) > n", arg=count_before
-    )
-
-
-def drawn_count(page: Any) -> int:
-    return int(page.get_attribute("#image-canvas", "data-drawn"))
-
-
 def test_canvas_matches_server_display_and_exposure(
-    page: Any, served: Served, cylinder_job: RenderedJob
+    page: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_viewer(page, served, cylinder_job.job_id)
+    open_viewer(page, live_service, cylinder_job.job_id)
     # The viewer opens at the automatic exposure (99th luminance percentile → white), not rounded: the
     # service's value from the bands equals the RGB luminance rule to float rounding.
     ev = float(page.get_attribute("#image-canvas", "data-ev"))
-    assert ev == served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["exposure_ev"]
+    assert ev == live_service.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["exposure_ev"]
     assert ev == pytest.approx(auto_exposure_ev(cylinder_job.exr.rgb), abs=1e-3)
     assert page.input_value("#ev-value") == f"{ev:.2f}"
     shown = canvas_rgb(page)
-    png = served.get(f"/v1/jobs/{cylinder_job.job_id}/display.png", ev=ev, tonemap="clamp").content
+    png = live_service.get(f"/v1/jobs/{cylinder_job.job_id}/display.png", ev=ev, tonemap="clamp").content
     server = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int64)
-    assert shown.shape == (SIZE_PX, SIZE_PX, 3)
+    assert shown.shape == (CYLINDER_SIZE_PX, CYLINDER_SIZE_PX, 3)
     assert np.abs(shown - server).max() <= 1
     screenshot(page, "viewer_srgb")
 
@@ -109,9 +66,11 @@ def test_canvas_matches_server_display_and_exposure(
     assert page.input_value("#ev-value") == f"{brighter_ev:.2f}"
 
 
-def test_wavelength_slider_switches_bands(page: Any, served: Served, cylinder_job: RenderedJob) -> None:
-    open_viewer(page, served, cylinder_job.job_id)
-    catalogue = served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()
+def test_wavelength_slider_switches_bands(
+    page: Any, live_service: LiveService, cylinder_job: RenderedJob
+) -> None:
+    open_viewer(page, live_service, cylinder_job.job_id)
+    catalogue = live_service.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()
     layers = {layer["name"]: layer for layer in catalogue["layers"]}
     bands = cylinder_job.exr.band_names()
     count = drawn_count(page)
@@ -136,15 +95,15 @@ def test_wavelength_slider_switches_bands(page: Any, served: Served, cylinder_jo
 
 
 def test_diagnostic_layer_uses_covered_pixels_and_legend(
-    page: Any, served: Served, cylinder_job: RenderedJob
+    page: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_viewer(page, served, cylinder_job.job_id)
+    open_viewer(page, live_service, cylinder_job.job_id)
     count = drawn_count(page)
     page.select_option("#display-mode", "coherence.l1_um")
     redrawn(page, count)
     info = next(
         layer
-        for layer in served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["layers"]
+        for layer in live_service.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["layers"]
         if layer["name"] == "coherence.l1_um"
     )
     exr = cylinder_job.exr.channels
@@ -157,9 +116,9 @@ def test_diagnostic_layer_uses_covered_pixels_and_legend(
 
 
 def test_ellipses_are_vertical_for_a_cylinder_light(
-    page: Any, served: Served, cylinder_job: RenderedJob
+    page: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_viewer(page, served, cylinder_job.job_id)
+    open_viewer(page, live_service, cylinder_job.job_id)
     page.fill("#ellipse-spacing", "6")
     page.dispatch_event("#ellipse-spacing", "change")
     page.check("#show-ellipses")  # off in a job's first view (issue 29): one click (or C) away
@@ -172,7 +131,7 @@ def test_ellipses_are_vertical_for_a_cylinder_light(
                     width: box.width, height: box.height, transform: e.getAttribute('transform')};
         })"""
     )
-    grid = served.get(f"/v1/jobs/{cylinder_job.job_id}/ellipses", spacing=6).json()["ellipses"]
+    grid = live_service.get(f"/v1/jobs/{cylinder_job.job_id}/ellipses", spacing=6).json()["ellipses"]
     assert len(shapes) == len(grid) >= 8
     angle = cylinder_job.exr.channels["coherence.angle"]
     for shape in shapes:
@@ -187,10 +146,10 @@ def test_ellipses_are_vertical_for_a_cylinder_light(
 
 
 def test_ellipses_are_drawn_with_the_angle_convention(
-    page: Any, served: Served, diagonal_cylinder_job: RenderedJob
+    page: Any, live_service: LiveService, diagonal_cylinder_job: RenderedJob
 ) -> None:
     """`angle` is counter-clockwise from +x with image +y up: ℓ₁ at +45° runs up and to the right."""
-    open_viewer(page, served, diagonal_cylinder_job.job_id)
+    open_viewer(page, live_service, diagonal_cylinder_job.job_id)
     page.check("#show-ellipses")
     page.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
     directions = page.evaluate(
@@ -213,13 +172,15 @@ def test_ellipses_are_drawn_with_the_angle_convention(
     screenshot(page, "viewer_ellipses_diagonal")
 
 
-def test_inspector_spectrum_equals_the_exr(page: Any, served: Served, cylinder_job: RenderedJob) -> None:
-    open_viewer(page, served, cylinder_job.job_id)
+def test_inspector_spectrum_equals_the_exr(
+    page: Any, live_service: LiveService, cylinder_job: RenderedJob
+) -> None:
+    open_viewer(page, live_service, cylinder_job.job_id)
     exr = cylinder_job.exr
     covered = np.argwhere(exr.channels["coherence.weight"] > 0)
     y, x = (int(v) for v in covered[len(covered) // 3])
     box = page.locator("#image-canvas").bounding_box()
-    scale = box["width"] / SIZE_PX
+    scale = box["width"] / CYLINDER_SIZE_PX
     page.mouse.click(box["x"] + (x + 0.5) * scale, box["y"] + (y + 0.5) * scale)
     page.wait_for_selector('#spectrum-plot circle[data-series="A"]')
     points = page.evaluate(
@@ -247,8 +208,8 @@ def test_inspector_spectrum_equals_the_exr(page: Any, served: Served, cylinder_j
     screenshot(page, "viewer_inspector")
 
 
-def test_running_job_progress_bar_advances(page: Any, served: Served) -> None:
-    page.goto(f"{served.base_url}/#/jobs")
+def test_running_job_progress_bar_advances(page: Any, live_service: LiveService) -> None:
+    page.goto(f"{live_service.base_url}/#/jobs")
     page.wait_for_function("() => document.querySelector('#scene-example').options.length > 1")
     page.select_option("#scene-example", "thin_film_cylinder_light.json")
     page.fill("#override-spp", "64")
@@ -276,21 +237,21 @@ def test_running_job_progress_bar_advances(page: Any, served: Served) -> None:
         if status == "running" and not preview_seen:
             # Before any chunk finishes the image endpoints answer 409; afterwards they serve a preview
             # merged from the finished chunks (flagged partial).
-            view = served.get(f"/v1/jobs/{job_id}").json()
-            layers = served.get(f"/v1/jobs/{job_id}/layers")
+            view = live_service.get(f"/v1/jobs/{job_id}").json()
+            layers = live_service.get(f"/v1/jobs/{job_id}/layers")
             if view["status"] == "running" and view["chunks_done"] == 0 and layers.status_code == 409:
                 pass
             elif layers.status_code == 200 and view["status"] == "running":
                 catalogue = layers.json()
                 assert catalogue["partial"] is True and (catalogue["width"], catalogue["height"]) == (48, 48)
-                assert served.get(f"/v1/jobs/{job_id}/display.png").status_code == 200
+                assert live_service.get(f"/v1/jobs/{job_id}/display.png").status_code == 200
                 preview_seen = True
         if status in ("succeeded", "failed", "canceled"):
             break
         page.wait_for_timeout(50)
     assert page.get_attribute(row, "data-status") == "succeeded"
     assert preview_seen  # 4 chunks of ≈0.3 s each, polled every 50 ms
-    assert served.get(f"/v1/jobs/{job_id}/layers").json()["partial"] is False
+    assert live_service.get(f"/v1/jobs/{job_id}/layers").json()["partial"] is False
     values.append(float(page.evaluate(f"() => document.querySelector('{row} progress').value")))
     intermediate = sorted({v for v in values if 0.0 < v < 1.0})
     # 4 chunks on one worker: at least the 25 %, 50 %, 75 % steps are shown before 100 %.
@@ -303,9 +264,9 @@ def test_running_job_progress_bar_advances(page: Any, served: Served) -> None:
 
 
 def test_compare_view_shows_delta_e(
-    page: Any, served: Served, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
+    page: Any, live_service: LiveService, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
 ) -> None:
-    page.goto(f"{served.base_url}/#/jobs")
+    page.goto(f"{live_service.base_url}/#/jobs")
     a, b = cylinder_job.job_id, cylinder_job_reseeded.job_id
     page.wait_for_selector(f'tr[data-job-id="{a}"]')
     page.check(f'tr[data-job-id="{a}"] .job-select')
@@ -313,25 +274,25 @@ def test_compare_view_shows_delta_e(
     page.click("#compare-selected")
     page.wait_for_function("() => Number(document.querySelector('.compare')?.dataset.ready) >= 1")
     # Opens at a's automatic exposure (not 0 EV), the one regression runs use.
-    auto_ev = served.get(f"/v1/jobs/{a}/layers").json()["exposure_ev"]
+    auto_ev = live_service.get(f"/v1/jobs/{a}/layers").json()["exposure_ev"]
     left = canvas_rgb(page, ".compare-left")
     assert np.abs(left - display_rgb8(cylinder_job.exr.rgb, auto_ev, "clamp")).max() <= 1
     page.fill(".compare-split", "30")
     screenshot(page, "compare_split")
     page.select_option(".compare-mode", "de2000")
     page.wait_for_function("() => Number(document.querySelector('.compare').dataset.ready) >= 2")
-    response = served.get("/v1/compare", a=a, b=b, mode="de2000")
+    response = live_service.get("/v1/compare", a=a, b=b, mode="de2000")
     assert float(response.headers["X-Exposure-EV"]) == auto_ev
     import json
 
     stats = json.loads(response.headers["X-Stats"])
     assert float(page.get_attribute(".compare-stats", "data-mean")) == pytest.approx(stats["mean"], rel=1e-12)
     assert "ΔE₀₀" in page.inner_text(".compare-stats")
-    diff = np.frombuffer(response.content, dtype="<f4").reshape(SIZE_PX, SIZE_PX)
+    diff = np.frombuffer(response.content, dtype="<f4").reshape(CYLINDER_SIZE_PX, CYLINDER_SIZE_PX)
     assert np.abs(canvas_rgb(page, ".compare-diff") - viridis8(diff / 10.0)).max() <= 1
     # Hover readout: both images' values and the map's at the pixel under the pointer.
     stage = page.locator(".compare-stage").bounding_box()
-    scale = stage["width"] / SIZE_PX
+    scale = stage["width"] / CYLINDER_SIZE_PX
     page.mouse.move(stage["x"] + 6.5 * scale, stage["y"] + 9.5 * scale)
     readout = page.inner_text(".compare-readout")
     assert readout.startswith("(6, 9) linear R G B a: ")
@@ -339,7 +300,7 @@ def test_compare_view_shows_delta_e(
     screenshot(page, "compare_de2000")
     page.select_option(".compare-mode", "flip")
     page.wait_for_function("() => Number(document.querySelector('.compare').dataset.ready) >= 3")
-    flip_stats = json.loads(served.get("/v1/compare", a=a, b=b, mode="flip").headers["X-Stats"])
+    flip_stats = json.loads(live_service.get("/v1/compare", a=a, b=b, mode="flip").headers["X-Stats"])
     assert float(page.get_attribute(".compare-stats", "data-p95")) == pytest.approx(
         flip_stats["p95"], rel=1e-12
     )
@@ -348,9 +309,9 @@ def test_compare_view_shows_delta_e(
 
 
 def test_controls_are_labelled_and_keyboard_reachable(
-    page: Any, served: Served, cylinder_job: RenderedJob
+    page: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_viewer(page, served, cylinder_job.job_id)
+    open_viewer(page, live_service, cylinder_job.job_id)
     unlabelled = page.evaluate(
         """() => [...document.querySelectorAll('input, select, button, canvas, [tabindex]')]
             .filter((e) => e.offsetParent !== null)
@@ -393,14 +354,14 @@ def test_controls_are_labelled_and_keyboard_reachable(
 
 
 def test_narrow_viewport_has_no_horizontal_overflow(
-    chromium: Any, served: Served, cylinder_job: RenderedJob
+    chromium: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
     context = chromium.new_context(viewport={"width": 375, "height": 667}, device_scale_factor=2)
-    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {served.token!r});")
+    context.add_init_script(f"window.localStorage.setItem('hgrender.token', {live_service.token!r});")
     page = context.new_page()
     try:
         for route, name in (("#/jobs", "narrow_jobs"), (f"#/view/{cylinder_job.job_id}", "narrow_viewer")):
-            page.goto(f"{served.base_url}/{route}")
+            page.goto(f"{live_service.base_url}/{route}")
             page.wait_for_load_state("networkidle")
             page.wait_for_timeout(300)
             widths = page.evaluate(
@@ -412,33 +373,29 @@ def test_narrow_viewport_has_no_horizontal_overflow(
         context.close()
 
 
-def test_cancel_and_delete_from_the_job_list(page: Any, served: Served) -> None:
-    from tests.web.conftest import cylinder_scene
-
+def test_cancel_and_delete_from_the_job_list(page: Any, live_service: LiveService) -> None:
     # Long enough to be still queued or running whenever the click comes: 64×64 px × 16384 spp on one
     # worker renders for tens of seconds (256 spp took under a second once small jobs got faster);
     # canceled, it stops within a render pass.
-    job_id = served.client.submit(cylinder_scene(width=64, height=64, spp=16384), name="to cancel")["id"]
-    page.goto(f"{served.base_url}/#/jobs")
+    job_id = live_service.admin.submit(cylinder_scene(width=64, height=64, spp=16384), name="to cancel")["id"]
+    page.goto(f"{live_service.base_url}/#/jobs")
     row = f'tr[data-job-id="{job_id}"]'
     page.wait_for_selector(row)
     page.click(f"{row} .job-cancel")
     page.wait_for_function(f"() => document.querySelector('{row}').dataset.status === 'canceled'")
-    assert served.client.get(job_id)["status"] == "canceled"
+    assert live_service.admin.get(job_id)["status"] == "canceled"
     page.once("dialog", lambda dialog: dialog.accept())
     page.click(f"{row} .job-delete")
     page.wait_for_selector(row, state="detached")
-    assert served.get(f"/v1/jobs/{job_id}").status_code == 404
+    assert live_service.get(f"/v1/jobs/{job_id}").status_code == 404
 
 
-def test_upload_a_json_scene_with_overrides(page: Any, served: Served, tmp_path: Any) -> None:
+def test_upload_a_json_scene_with_overrides(page: Any, live_service: LiveService, tmp_path: Any) -> None:
     import json
-
-    from tests.web.conftest import cylinder_scene
 
     scene_file = tmp_path / "uploaded.json"
     scene_file.write_text(json.dumps(cylinder_scene()))
-    page.goto(f"{served.base_url}/#/jobs")
+    page.goto(f"{live_service.base_url}/#/jobs")
     page.wait_for_function("() => document.querySelector('#scene-example').options.length > 1")
     page.set_input_files("#scene-file", str(scene_file))
     page.fill("#override-width", "16")
@@ -450,24 +407,27 @@ def test_upload_a_json_scene_with_overrides(page: Any, served: Served, tmp_path:
         "() => document.querySelector('#submit-status').textContent.startsWith('submitted')"
     )
     job_id = page.inner_text("#submit-status").split()[-1]
-    final = served.wait_final(job_id)
+    final = live_service.wait_final(job_id)
     assert final["status"] == "succeeded" and final["spp"] == 2 and final["name"] == "uploaded"
-    layers = served.get(f"/v1/jobs/{job_id}/layers").json()
+    layers = live_service.get(f"/v1/jobs/{job_id}/layers").json()
     assert (layers["width"], layers["height"]) == (16, 12)  # the overrides were edited into film
 
 
-def test_viewer_refines_a_noise_target_job_round_by_round(page: Any, served: Served) -> None:
+def test_viewer_refines_a_noise_target_job_round_by_round(page: Any, live_service: LiveService) -> None:
     """Issue 16 item 4: opened while a noise-target job runs, the viewer shows the image of the rounds
     finished so far and reloads it when a newer one is published (polling the job every second), then
     the final image. A 0.3 % band-mean target from 2 spp on the 24² cylinder-light plane takes rounds of
     2, 18, 162, 1458, … spp (8× growth cap); the first round's preview and that of a later round
     lasting seconds (published: it outlasts 10× the first publication) are each shown ≥ 1 s."""
-    job_id = served.client.submit(cylinder_scene(spp=2), name="refining", target_rel_error=0.003)["id"]
+    job_id = live_service.admin.submit(cylinder_scene(spp=2), name="refining", target_rel_error=0.003)["id"]
     deadline = time.monotonic() + 120
-    while not (served.client.get(job_id)["noise_target"].get("rounds") or []):
-        assert time.monotonic() < deadline and served.client.get(job_id)["status"] in ("queued", "running")
+    while not (live_service.admin.get(job_id)["noise_target"].get("rounds") or []):
+        assert time.monotonic() < deadline and live_service.admin.get(job_id)["status"] in (
+            "queued",
+            "running",
+        )
         time.sleep(0.05)
-    open_viewer(page, served, job_id)
+    open_viewer(page, live_service, job_id)
     shown: dict[int, np.ndarray] = {}  # preview spp → canvas shown for it
     while time.monotonic() < deadline:
         # One evaluate reads the line and the canvas together (no refresh can run in between).
@@ -485,7 +445,7 @@ def test_viewer_refines_a_noise_target_job_round_by_round(page: Any, served: Ser
             assert f"preview at {spp} spp" in text
             screenshot(page, f"viewer_refining_{len(shown)}")
         page.wait_for_timeout(50)
-    final = served.wait_final(job_id)
+    final = live_service.wait_final(job_id)
     assert final["status"] == "succeeded"
     rounds_spp = [int(r["spp"]) for r in final["noise_target"]["rounds"]]
     # At least two rounds' previews were shown one after the other without reopening, each a round's
@@ -496,7 +456,7 @@ def test_viewer_refines_a_noise_target_job_round_by_round(page: Any, served: Ser
     assert all(np.abs(a - b).max() > 0 for a, b in itertools.pairwise(canvases))
     # Then the final image replaces the last preview at the exposure the user had: the server's display.
     ev = float(page.get_attribute("#image-canvas", "data-ev"))
-    png = served.get(f"/v1/jobs/{job_id}/display.png", ev=ev, tonemap="clamp").content
+    png = live_service.get(f"/v1/jobs/{job_id}/display.png", ev=ev, tonemap="clamp").content
     server = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int64)
     assert np.abs(canvas_rgb(page) - server).max() <= 1
     assert page.is_enabled("#download-exr")

@@ -3,10 +3,10 @@ terminal must work on a fresh clone, fail loudly where it fails, and leave the s
 
 Each document's blocks run in order as one bash script (``set -euo pipefail``; variables such as ``$JOB``
 carry from block to block, as in one terminal) in a scratch directory that holds the repository's files
-(symlinks) and ``data`` → the data dir of the session's ``hgrender serve`` (``tests/web/conftest.py``: auth
-on, private Redis, one worker), so ``cat data/admin.token`` reads its token. Two things are adapted, both
-as a user would: the service's address ``127.0.0.1:8000`` becomes the session service's (8000 may be
-taken on a shared machine), and ``HGRENDER_URL`` names it for the client commands (README: "find the
+(symlinks) and ``data`` → the data dir of the module's ``live_service`` (``tests/support/live_service.py``:
+auth on, one worker), so ``cat data/admin.token`` reads its token. Two things are adapted, both as a user
+would: the service's address ``127.0.0.1:8000`` becomes the live service's (8000 may be taken on a shared
+machine), and ``HGRENDER_URL`` names it for the client commands (README: "find the
 service in --url / HGRENDER_URL"). ``make serve`` runs as written too, on a free ``PORT`` and a scratch
 ``DATA_DIR`` from the environment (as the README says), and is stopped with Ctrl-C through a terminal.
 What is not run here, and why, is listed in ``NOT_RUN_HERE``; a listed command that the documents no
@@ -31,7 +31,8 @@ import httpx
 import pytest
 
 from service.redis_server import free_loopback_port
-from tests.web.conftest import REPO_ROOT, Served
+from tests.support import REPO_ROOT
+from tests.support.live_service import LiveService
 
 DOCUMENTS = ("README.md", "docs/api.md")
 SHELL_BLOCK = re.compile(r"^```(?:sh|bash|shell)\n(.*?)^```", re.MULTILINE | re.DOTALL)
@@ -73,22 +74,22 @@ def runnable_script(document: str, base_url: str) -> tuple[str, list[str]]:
 
 
 @pytest.fixture(scope="module")
-def fresh_clone(tmp_path_factory: pytest.TempPathFactory, served: Served) -> Path:
+def fresh_clone(tmp_path_factory: pytest.TempPathFactory, live_service: LiveService) -> Path:
     """A scratch directory with the repository's top-level entries (symlinks) and ``data`` → the session
     service's data dir; commands write their outputs (out/, image.exr, baselines/ …) here."""
     directory = tmp_path_factory.mktemp("fresh-clone")
     for entry in REPO_ROOT.iterdir():
         if entry.name not in {"data", "out", "test-artifacts", ".git"}:
             (directory / entry.name).symlink_to(entry)
-    (directory / "data").symlink_to(served.data_dir)
+    (directory / "data").symlink_to(live_service.data_dir)
     return directory
 
 
-def run_script(script: str, cwd: Path, served: Served) -> subprocess.CompletedProcess[str]:
+def run_script(script: str, cwd: Path, live_service: LiveService) -> subprocess.CompletedProcess[str]:
     """Run ``script`` with bash in its own process group; past SCRIPT_TIMEOUT_S the whole group is stopped
     (SIGTERM: a service a block started shuts down its workers and Redis too), and the test fails."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("HGRENDER_") and k != "REDIS_URL"}
-    env["HGRENDER_URL"] = served.base_url
+    env["HGRENDER_URL"] = live_service.base_url
     process = subprocess.Popen(
         ["bash", "-c", script],
         cwd=cwd,
@@ -143,10 +144,10 @@ def test_the_documents_left_out_list_is_current() -> None:
     assert in_repository <= tracked, in_repository - tracked
 
 
-def test_readme_blocks_run_as_written(served: Served, fresh_clone: Path) -> None:
-    script, left_out = runnable_script("README.md", served.base_url)
+def test_readme_blocks_run_as_written(live_service: LiveService, fresh_clone: Path) -> None:
+    script, left_out = runnable_script("README.md", live_service.base_url)
     assert set(left_out) == set(NOT_RUN_HERE) | {LONG_RUNNING}
-    result = run_script(script, fresh_clone, served)
+    result = run_script(script, fresh_clone, live_service)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     # What the commands were for is there: the local render, the regression report, the service job's
     # artifacts, the curl download.
@@ -157,30 +158,35 @@ def test_readme_blocks_run_as_written(served: Served, fresh_clone: Path) -> None
     assert not re.search(r"100% \((running|merging)", result.stderr), result.stderr
 
 
-def test_api_blocks_run_as_written(served: Served, fresh_clone: Path) -> None:
-    script, left_out = runnable_script("docs/api.md", served.base_url)
+def test_api_blocks_run_as_written(live_service: LiveService, fresh_clone: Path) -> None:
+    script, left_out = runnable_script("docs/api.md", live_service.base_url)
     assert left_out == []
-    result = run_script(script, fresh_clone, served)
+    result = run_script(script, fresh_clone, live_service)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert (fresh_clone / "image.exr").stat().st_size > 0
     assert (fresh_clone / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # The multipart line rendered the USD file the repository ships.
     usd_jobs = [
-        job for job in served.client.list(limit=100)["items"] if job["name"] == "Cornell box from USD"
+        job for job in live_service.admin.list(limit=100)["items"] if job["name"] == "Cornell box from USD"
     ]
-    assert usd_jobs and served.wait_final(usd_jobs[0]["id"])["status"] == "succeeded"
+    assert usd_jobs and live_service.wait_final(usd_jobs[0]["id"])["status"] == "succeeded"
 
 
 def test_make_serve_starts_and_a_ctrl_c_stops_it_quietly(tmp_path: Path) -> None:
     """`make serve` as the README says (PORT, DATA_DIR from the environment) in a terminal; Ctrl-C (the
     terminal's SIGINT to the foreground group: make and serve) ends it in order, without make's
-    "*** [Makefile:…: serve] Error 130" or a traceback."""
+    "*** [Makefile:…: serve] Error 130" or a traceback; and its log at INFO has no periodic noise."""
     up_to_date = subprocess.run(["make", "-q", ".venv/.installed"], cwd=REPO_ROOT, capture_output=True)
     if up_to_date.returncode != 0:
         pytest.skip("the virtual environment is older than pyproject.toml: make serve would reinstall it")
     port = free_loopback_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("HGRENDER_") and k != "REDIS_URL"}
-    env |= {"PORT": str(port), "DATA_DIR": str(tmp_path / "data")}
+    # RQ's registry maintenance every second (5 s by default), so that a few passes fall in the run.
+    env |= {
+        "PORT": str(port),
+        "DATA_DIR": str(tmp_path / "data"),
+        "HGRENDER_WORKER_MAINTENANCE_INTERVAL_S": "1",
+    }
     pid, terminal = pty.fork()
     if pid == 0:  # the child: make in the terminal's foreground group
         os.chdir(REPO_ROOT)
@@ -206,6 +212,7 @@ def test_make_serve_starts_and_a_ctrl_c_stops_it_quietly(tmp_path: Path) -> None
         else:
             pytest.fail(f"make serve did not become healthy: {output.decode(errors='replace')[-2000:]}")
         assert (tmp_path / "data" / "admin.token").exists()  # DATA_DIR was used
+        read_for(4.0)  # several maintenance passes, which must not reach the log at INFO
         os.write(terminal, b"\x03")  # Ctrl-C, as typed
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
@@ -226,21 +233,9 @@ def test_make_serve_starts_and_a_ctrl_c_stops_it_quietly(tmp_path: Path) -> None
     assert "shutting down" in text, text[-2000:]
     assert "make: ***" not in text and "Error 130" not in text, text[-2000:]
     assert "Traceback" not in text, text[-2000:]
+    # The serve log at INFO has no periodic noise: RQ's registry maintenance (four lines a pass before,
+    # over half of a serve.log) is logged at DEBUG, while the worker's own lines are there.
+    assert "rq.worker" in text, text[-2000:]
+    assert "cleaning registries" not in text and "cleaning group registries" not in text, text[-2000:]
     # make ends by the signal it was sent (its shell sees an interrupted command, as it should).
     assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGINT
-
-
-def test_serve_log_has_no_periodic_noise(served: Served) -> None:
-    """After the session's service has run for several maintenance intervals (5 s each), its log at INFO
-    holds no RQ registry maintenance (four lines per interval before: over half of a serve.log)."""
-    log = served.data_dir / "serve.log"
-    first = log.read_text().splitlines()
-    started = next(
-        float(time.mktime(time.strptime(line[:19], "%Y-%m-%d %H:%M:%S")))
-        for line in first
-        if line[:4].isdigit()
-    )
-    time.sleep(max(0.0, started + 12 - time.time()))  # at least two maintenance passes
-    text = log.read_text()
-    assert "rq.worker" in text  # the worker logs here
-    assert "cleaning registries" not in text and "cleaning group registries" not in text

@@ -12,16 +12,24 @@ name (1 spp). Screenshots: test-artifacts/first_view_*.png.
 
 from __future__ import annotations
 
-import io
 from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 import pytest
-from PIL import Image
 
-from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, screenshot, token_page
-from tests.web.test_browser import canvas_rgb, drawn_count, redrawn
+from tests.support.browser import (
+    MAX_ELLIPSE_COVERAGE,
+    assert_ellipses_inside_their_cells,
+    canvas_rgb,
+    drawn_count,
+    overlay_coverage,
+    redrawn,
+    screenshot,
+    token_page,
+)
+from tests.support.live_service import LiveService, RenderedJob
+from tests.support.scenes import CYLINDER_SIZE_PX, cylinder_scene
 
 pytestmark = pytest.mark.browser
 VIEWPORTS = [(1400, 900), (1280, 800)]
@@ -32,35 +40,30 @@ LONG_NAME = (
     )
 )
 # An overlay "covers" a screen pixel it changes by more than this (8-bit, any channel): well above the
-# ±1 of image resampling between two screenshots, well below a drawn outline or fill.
-CHANGED_LEVELS = 16
-# By default nothing is drawn over the image; with ellipses shown (C, or a gallery scene whose telling
-# view they are) they may cover at most this fraction of the image's pixels.
-MAX_ELLIPSE_COVERAGE = 0.35
 
 
 @pytest.fixture(scope="module")
-def long_named_job(served: Served) -> str:
-    return served.render(cylinder_scene(width=8, height=8, spp=1), LONG_NAME)
+def long_named_job(live_service: LiveService) -> str:
+    return live_service.render(cylinder_scene(width=8, height=8, spp=1), LONG_NAME)
 
 
 @pytest.fixture(params=VIEWPORTS, ids=lambda size: f"{size[0]}x{size[1]}")
-def window(request: pytest.FixtureRequest, chromium: Any, served: Served) -> Iterator[Any]:
+def window(request: pytest.FixtureRequest, chromium: Any, live_service: LiveService) -> Iterator[Any]:
     """A page at each window size (for what depends on it: layout, the first view)."""
     width, height = request.param
-    with token_page(chromium, served.token, width, height) as page:
+    with token_page(chromium, live_service.token, width, height) as page:
         yield page
 
 
 @pytest.fixture
-def wide(chromium: Any, served: Served) -> Iterator[Any]:
+def wide(chromium: Any, live_service: LiveService) -> Iterator[Any]:
     """A 1400×900 page (for what does not depend on the window size)."""
-    with token_page(chromium, served.token, *VIEWPORTS[0]) as page:
+    with token_page(chromium, live_service.token, *VIEWPORTS[0]) as page:
         yield page
 
 
-def open_image(page: Any, served: Served, job_id: str) -> None:
-    page.goto(f"{served.base_url}/#/view/{job_id}")
+def open_image(page: Any, live_service: LiveService, job_id: str) -> None:
+    page.goto(f"{live_service.base_url}/#/view/{job_id}")
     page.wait_for_function("() => Number(document.querySelector('#image-canvas').dataset.drawn) >= 1")
     page.wait_for_function("() => document.querySelector('#ellipse-overlay').dataset.count !== undefined")
 
@@ -80,51 +83,13 @@ def inside_window(page: Any, selector: str) -> None:
     assert box["y"] >= 0 and box["y"] + box["height"] <= size["height"], (selector, box)
 
 
-def overlay_coverage(page: Any) -> float:
-    """Fraction of the image's on-screen pixels changed by what is drawn over it (ellipses, halos,
-    markers, values, scale bar, readout): screenshots of the image with those layers shown and hidden."""
-    image = page.locator("#image-canvas").bounding_box()
-    view = page.locator("#viewport").bounding_box()
-    x0, y0 = max(image["x"], view["x"]), max(image["y"], view["y"])
-    x1 = min(image["x"] + image["width"], view["x"] + view["width"])
-    y1 = min(image["y"] + image["height"], view["y"] + view["height"])
-    clip = {"x": x0, "y": y0, "width": x1 - x0, "height": y1 - y0}
-    layers = "#ellipse-overlay, #ellipse-halo, #marker-overlay, #value-canvas, #scale-bar, #hover-readout"
-
-    def shot() -> np.ndarray:
-        return np.asarray(Image.open(io.BytesIO(page.screenshot(clip=clip))).convert("RGB"), int)
-
-    shown = shot()
-    page.evaluate(
-        f"() => document.querySelectorAll('{layers}').forEach((e) => (e.style.visibility = 'hidden'))"
-    )
-    hidden = shot()
-    page.evaluate(f"() => document.querySelectorAll('{layers}').forEach((e) => (e.style.visibility = ''))")
-    return float((np.abs(shown - hidden).max(axis=2) > CHANGED_LEVELS).mean())
-
-
-def assert_ellipses_inside_their_cells(page: Any) -> None:
-    """With the auto scale every ellipse's ℓ₁ semi-axis is at most half the grid spacing (image px), and
-    the ellipse layers clip to the image."""
-    spacing = float(page.input_value("#ellipse-spacing"))
-    radii = page.evaluate(
-        "() => [...document.querySelectorAll('#ellipse-overlay ellipse')]"
-        ".map((e) => Number(e.getAttribute('rx')))"
-    )
-    assert radii and max(radii) <= spacing / 2 + 1e-9, (spacing, max(radii))
-    for layer in ("#ellipse-overlay", "#ellipse-halo"):
-        assert (
-            page.evaluate(f"() => getComputedStyle(document.querySelector('{layer}')).overflow") == "hidden"
-        )
-
-
 # ---- the first view ------------------------------------------------------------------------------------
 
 
 def test_first_view_is_the_picture_with_ellipses_one_key_away(
-    window: Any, served: Served, cylinder_job: RenderedJob
+    window: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(window, served, cylinder_job.job_id)
+    open_image(window, live_service, cylinder_job.job_id)
     size = window.viewport_size
     assert not window.is_checked("#show-ellipses")
     assert window.locator("#ellipse-overlay ellipse").count() == 0
@@ -153,9 +118,9 @@ def test_first_view_is_the_picture_with_ellipses_one_key_away(
 
 
 def test_job_list_fits_and_names_link_to_their_job(
-    window: Any, served: Served, cylinder_job: RenderedJob, long_named_job: str
+    window: Any, live_service: LiveService, cylinder_job: RenderedJob, long_named_job: str
 ) -> None:
-    window.goto(f"{served.base_url}/#/jobs")
+    window.goto(f"{live_service.base_url}/#/jobs")
     row = f'tr[data-job-id="{long_named_job}"]'
     window.wait_for_selector(row)
     no_horizontal_scroll(window)
@@ -180,10 +145,10 @@ def test_job_list_fits_and_names_link_to_their_job(
 
 
 def test_compare_fits_with_its_statistics_beside_the_images(
-    window: Any, served: Served, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
+    window: Any, live_service: LiveService, cylinder_job: RenderedJob, cylinder_job_reseeded: RenderedJob
 ) -> None:
     a, b = cylinder_job.job_id, cylinder_job_reseeded.job_id
-    window.goto(f"{served.base_url}/#/compare/{a}/{b}")
+    window.goto(f"{live_service.base_url}/#/compare/{a}/{b}")
     window.wait_for_function("() => Number(document.querySelector('.compare')?.dataset.ready) >= 1")
     window.select_option(".compare-mode", "de2000")
     window.wait_for_function("() => Number(document.querySelector('.compare').dataset.ready) >= 2")
@@ -223,17 +188,17 @@ def cyclic8(t: np.ndarray) -> np.ndarray:
 
 
 def test_maps_readouts_ellipses_and_inspector_agree_at_the_slider_wavelength(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
     exr = cylinder_job.exr.channels
     covered = np.argwhere(exr["coherence.weight"] > 0)
     y, x = (int(v) for v in covered[len(covered) // 2])
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     canvas = wide.locator("#image-canvas").bounding_box()
-    scale = canvas["width"] / SIZE_PX
+    scale = canvas["width"] / CYLINDER_SIZE_PX
     info = {
         layer["name"]: layer
-        for layer in served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["layers"]
+        for layer in live_service.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["layers"]
     }
     count = drawn_count(wide)
     wide.select_option("#display-mode", "coherence.l1_um")
@@ -278,10 +243,10 @@ def test_maps_readouts_ellipses_and_inspector_agree_at_the_slider_wavelength(
     assert f"ellipse fill: coherence area at {nm:.0f} nm" in wide.inner_text("#ellipse-legend")
 
 
-def test_orientation_map_is_cyclic(wide: Any, served: Served, cylinder_job: RenderedJob) -> None:
+def test_orientation_map_is_cyclic(wide: Any, live_service: LiveService, cylinder_job: RenderedJob) -> None:
     """The cylinder along x makes ℓ₁ vertical at every floor pixel: angles near −90° and +90°, the same
     direction. A cyclic map shows them in one colour (viridis showed purple/yellow speckle)."""
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     count = drawn_count(wide)
     wide.select_option("#display-mode", "coherence.angle")
     redrawn(wide, count)
@@ -312,11 +277,11 @@ def test_orientation_map_is_cyclic(wide: Any, served: Served, cylinder_job: Rend
 
 
 def test_readouts_clear_when_the_job_or_the_layer_changes(
-    wide: Any, served: Served, cylinder_job: RenderedJob, diagonal_cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob, diagonal_cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     canvas = wide.locator("#image-canvas").bounding_box()
-    scale = canvas["width"] / SIZE_PX
+    scale = canvas["width"] / CYLINDER_SIZE_PX
     point = (canvas["x"] + 10.5 * scale, canvas["y"] + 12.5 * scale)
     wide.mouse.move(*point)
     assert wide.inner_text("#hover-readout").startswith("(10, 12) linear R G B")
@@ -330,7 +295,7 @@ def test_readouts_clear_when_the_job_or_the_layer_changes(
     wide.mouse.move(point[0] + 1, point[1])
     assert wide.inner_text("#hover-readout").startswith("(10, 12) ℓ₁")
     # Another job: nothing of the first one's readouts or inspector stays.
-    wide.goto(f"{served.base_url}/#/view/{diagonal_cylinder_job.job_id}")
+    wide.goto(f"{live_service.base_url}/#/view/{diagonal_cylinder_job.job_id}")
     wide.wait_for_function(
         "(id) => document.querySelector('#viewer-title').textContent.includes(id.slice(0, 8))",
         arg=diagonal_cylinder_job.job_id,
@@ -346,7 +311,7 @@ def test_readouts_clear_when_the_job_or_the_layer_changes(
 
 def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
     wide: Any,
-    served: Served,
+    live_service: LiveService,
     cylinder_job: RenderedJob,
     cylinder_job_reseeded: RenderedJob,
     long_named_job: str,
@@ -359,7 +324,7 @@ def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
     images: list[Any] = []
     wide.route("**/v1/examples", lambda route: examples.append(route))
     wide.route("**/layers/rgb*", lambda route: images.append(route))
-    wide.goto(f"{served.base_url}/#/jobs")
+    wide.goto(f"{live_service.base_url}/#/jobs")
     while not examples:
         wide.wait_for_timeout(20)
     wide.evaluate("(hash) => (window.location.hash = hash)", f"#/compare/{a}/{b}")
@@ -380,13 +345,13 @@ def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
     wide.select_option(".compare-mode", "abs")
     wide.wait_for_function("() => document.querySelector('.compare-stats').dataset.mean !== undefined")
     # A pair that cannot be compared (8² against 24²): the error, and no map or numbers of before.
-    wide.goto(f"{served.base_url}/#/compare/{a}/{long_named_job}")
+    wide.goto(f"{live_service.base_url}/#/compare/{a}/{long_named_job}")
     wide.wait_for_function("() => !document.querySelector('#error').hidden")
     assert "rightJobId: image is 8x8" in wide.inner_text("#error")
     assert wide.locator(".compare").count() == 0
     assert wide.locator(".compare-stats").count() == 0
     # A job that does not exist: the same.
-    wide.goto(f"{served.base_url}/#/compare/{a}/{'0' * 32}")
+    wide.goto(f"{live_service.base_url}/#/compare/{a}/{'0' * 32}")
     wide.wait_for_function("() => document.querySelector('#error').textContent.includes('404')")
     assert wide.locator(".compare").count() == 0
 
@@ -395,9 +360,9 @@ def test_compare_route_mounts_once_and_a_failed_compare_clears_the_old_one(
 
 
 def test_shortcuts_work_after_enter_or_escape_in_a_field(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     ev = float(wide.get_attribute("#image-canvas", "data-ev"))
     count = drawn_count(wide)
     wide.fill("#ev-value", f"{ev + 1:.2f}")

@@ -17,22 +17,23 @@ import pytest
 
 from hgcore.artifacts.exr import read_exr
 from hgcore.imaging import tone_map
-from tests.web.conftest import SIZE_PX, RenderedJob, Served, cylinder_scene, screenshot, token_page
-from tests.web.test_browser import canvas_rgb, drawn_count, redrawn, viridis8
+from tests.support.browser import canvas_rgb, drawn_count, redrawn, screenshot, token_page, viridis8
+from tests.support.live_service import LiveService, RenderedJob
+from tests.support.scenes import CYLINDER_SIZE_PX, cylinder_scene
 
 pytestmark = pytest.mark.browser
 WIDTH, HEIGHT = 1400, 900
 
 
 @pytest.fixture
-def wide(chromium: Any, served: Served) -> Iterator[Any]:
+def wide(chromium: Any, live_service: LiveService) -> Iterator[Any]:
     """A 1400×900 page with the admin token; fails the test on page errors."""
-    with token_page(chromium, served.token, WIDTH, HEIGHT, accept_downloads=True) as page:
+    with token_page(chromium, live_service.token, WIDTH, HEIGHT, accept_downloads=True) as page:
         yield page
 
 
-def open_image(page: Any, served: Served, job_id: str) -> None:
-    page.goto(f"{served.base_url}/#/view/{job_id}")
+def open_image(page: Any, live_service: LiveService, job_id: str) -> None:
+    page.goto(f"{live_service.base_url}/#/view/{job_id}")
     page.wait_for_function("() => Number(document.querySelector('#image-canvas').dataset.drawn) >= 1")
     page.wait_for_function("() => document.querySelector('#ellipse-overlay').dataset.count !== undefined")
 
@@ -46,9 +47,9 @@ def srgb_curve(v: np.ndarray) -> np.ndarray:
 
 
 def test_image_page_fits_1400x900_with_stats_and_colour_bar(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     wide.check("#show-ellipses")
     wide.wait_for_selector("#ellipse-legend canvas")
     count = drawn_count(wide)
@@ -71,10 +72,10 @@ def test_image_page_fits_1400x900_with_stats_and_colour_bar(
 
 
 def test_exposure_range_holds_auto_and_says_when_it_clamps(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
-    auto = served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["exposure_ev"]
+    open_image(wide, live_service, cylinder_job.job_id)
+    auto = live_service.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()["exposure_ev"]
     lo, hi = float(wide.get_attribute("#ev-slider", "min")), float(wide.get_attribute("#ev-slider", "max"))
     assert lo <= auto <= hi and float(wide.input_value("#ev-slider")) == pytest.approx(auto, abs=0.05)
     assert "clamped" not in wide.inner_text("#ev-note")
@@ -122,9 +123,9 @@ def ellipse_shapes(page: Any) -> list[dict[str, float]]:
 
 
 def test_ellipses_are_drawn_to_an_absolute_um_scale_in_every_mode(
-    wide: Any, served: Served, cylinder_job: RenderedJob, diagonal_cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob, diagonal_cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     wide.check("#show-ellipses")
     wide.select_option("#ellipse-scale", "20")
     wide.wait_for_function("() => document.querySelector('#ellipse-overlay').dataset.umPerPx === '20'")
@@ -160,16 +161,16 @@ def test_ellipses_are_drawn_to_an_absolute_um_scale_in_every_mode(
     assert len(shapes) >= 4 and min(s["screenMinor"] for s in shapes) >= 1.4
     screenshot(wide, "tev_ellipses_um_scale")
     # The same setting on another job: the same µm per pixel (comparable across jobs).
-    open_image(wide, served, diagonal_cylinder_job.job_id)
+    open_image(wide, live_service, diagonal_cylinder_job.job_id)
     wide.check("#show-ellipses")
     wide.wait_for_function("() => document.querySelectorAll('#ellipse-overlay ellipse').length > 0")
     assert wide.get_attribute("#ellipse-overlay", "data-um-per-px") == "20"
 
 
 def test_downloads_exr_png_diagnostics_and_spectrum_csv(
-    wide: Any, served: Served, cylinder_job: RenderedJob, tmp_path: Path
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob, tmp_path: Path
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
 
     def download(selector: str) -> Path:
         with wide.expect_download() as info:
@@ -180,7 +181,7 @@ def test_downloads_exr_png_diagnostics_and_spectrum_csv(
 
     exr = download("#download-exr")
     assert exr.suffix == ".exr"
-    assert exr.read_bytes() == served.get(f"/v1/jobs/{cylinder_job.job_id}/artifacts/image.exr").content
+    assert exr.read_bytes() == live_service.get(f"/v1/jobs/{cylinder_job.job_id}/artifacts/image.exr").content
     png = download("#download-png")
     from PIL import Image
 
@@ -202,11 +203,11 @@ def test_downloads_exr_png_diagnostics_and_spectrum_csv(
 
 
 def test_inspector_markers_axes_legend_and_hover_readouts(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     canvas = box(wide, "#image-canvas")
-    scale = canvas["width"] / SIZE_PX
+    scale = canvas["width"] / CYLINDER_SIZE_PX
     wide.mouse.click(canvas["x"] + 10.5 * scale, canvas["y"] + 4.5 * scale)
     wide.wait_for_selector('#marker-overlay g[data-slot="A"]')
     wide.check('input[name="inspect-slot"][value="B"]')
@@ -246,10 +247,10 @@ def test_inspector_markers_axes_legend_and_hover_readouts(
 
 
 def test_log_scale_works_when_the_first_percentile_is_zero(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
-    catalogue = served.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()
+    open_image(wide, live_service, cylinder_job.job_id)
+    catalogue = live_service.get(f"/v1/jobs/{cylinder_job.job_id}/layers").json()
     band = next(layer for layer in catalogue["layers"] if layer["kind"] == "band" and layer["p01"] <= 0)
     index = [layer["name"] for layer in catalogue["layers"] if layer["kind"] == "band"].index(band["name"])
     count = drawn_count(wide)
@@ -278,11 +279,11 @@ def test_log_scale_works_when_the_first_percentile_is_zero(
 
 
 def test_wrong_job_id_says_no_such_job_and_clears_the_image(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     for wrong in ("nonsense", "0" * 32):
-        wide.goto(f"{served.base_url}/#/view/{wrong}")
+        wide.goto(f"{live_service.base_url}/#/view/{wrong}")
         wide.wait_for_function("() => !document.querySelector('#error').hidden")
         assert wide.inner_text("#error").startswith(f"no such job: {wrong}")
         assert wide.inner_text("#viewer-title") == "No such job"
@@ -296,16 +297,20 @@ def test_wrong_job_id_says_no_such_job_and_clears_the_image(
 
 
 def test_job_list_columns_names_eta_and_regression_filter(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    regression = served.render(cylinder_scene(spp=1, width=8, height=8), "regression cylinder (run 0123abcd)")
-    long_job = served.client.submit(cylinder_scene(width=64, height=64, spp=16384), name="cylinder")["id"]
+    regression = live_service.render(
+        cylinder_scene(spp=1, width=8, height=8), "regression cylinder (run 0123abcd)"
+    )
+    long_job = live_service.admin.submit(cylinder_scene(width=64, height=64, spp=16384), name="cylinder")[
+        "id"
+    ]
     try:
-        wide.goto(f"{served.base_url}/#/jobs")
+        wide.goto(f"{live_service.base_url}/#/jobs")
         row = wide.locator(f'tr[data-job-id="{cylinder_job.job_id}"]')
         row.wait_for()
         assert row.locator(".job-name").inner_text() == f"cylinder · {cylinder_job.job_id[:8]}"
-        assert row.locator(".job-size").inner_text() == f"{SIZE_PX}×{SIZE_PX}"
+        assert row.locator(".job-size").inner_text() == f"{CYLINDER_SIZE_PX}×{CYLINDER_SIZE_PX}"
         assert row.locator(".job-spp").inner_text() == "4"
         assert re.search(r"\d\d:\d\d:\d\d", row.locator(".job-created").inner_text())
         # Two jobs of one scene name are told apart by their ids.
@@ -330,13 +335,13 @@ def test_job_list_columns_names_eta_and_regression_filter(
         )
         screenshot(wide, "tev_job_list")
     finally:
-        served.client.cancel(long_job)
+        live_service.admin.cancel(long_job)
 
 
 def test_tev_keys_work_without_clicking_the_image(
-    wide: Any, served: Served, cylinder_job: RenderedJob
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob
 ) -> None:
-    open_image(wide, served, cylinder_job.job_id)
+    open_image(wide, live_service, cylinder_job.job_id)
     ev = float(wide.get_attribute("#image-canvas", "data-ev"))
     wide.locator("body").focus()
     count = drawn_count(wide)
@@ -378,11 +383,11 @@ def test_tev_keys_work_without_clicking_the_image(
 
 
 def test_dropped_exr_is_decoded_by_the_service_and_shown(
-    wide: Any, served: Served, cylinder_job: RenderedJob, tmp_path: Path
+    wide: Any, live_service: LiveService, cylinder_job: RenderedJob, tmp_path: Path
 ) -> None:
     exr = tmp_path / "local.exr"
-    served.client.download(cylinder_job.job_id, "image.exr", exr)
-    wide.goto(f"{served.base_url}/#/view")
+    live_service.admin.download(cylinder_job.job_id, "image.exr", exr)
+    wide.goto(f"{live_service.base_url}/#/view")
     wide.wait_for_selector("#viewer-panel:not([hidden])")
     payload = base64.b64encode(exr.read_bytes()).decode()
     wide.evaluate(
@@ -411,11 +416,11 @@ def test_dropped_exr_is_decoded_by_the_service_and_shown(
     assert "file: not an OpenEXR file" in wide.inner_text("#error")
 
 
-def test_without_a_token_the_page_says_how_to_get_one(chromium: Any, served: Served) -> None:
+def test_without_a_token_the_page_says_how_to_get_one(chromium: Any, live_service: LiveService) -> None:
     context = chromium.new_context(viewport={"width": WIDTH, "height": HEIGHT})
     page = context.new_page()
     try:
-        page.goto(f"{served.base_url}/#/jobs")
+        page.goto(f"{live_service.base_url}/#/jobs")
         page.wait_for_selector("#token-help:not([hidden])")
         assert not page.locator("#jobs-empty").is_visible()
         text = page.inner_text("#token-help")
@@ -428,7 +433,7 @@ def test_without_a_token_the_page_says_how_to_get_one(chromium: Any, served: Ser
         assert "401" in page.inner_text("#error")
         assert page.locator("#token-help").is_visible()
         # The right one: the help goes away.
-        page.fill("#token", served.token)
+        page.fill("#token", live_service.token)
         page.click("#token-form button")
         page.wait_for_selector("#token-help", state="hidden")
     finally:

@@ -17,7 +17,7 @@
 //
 // `api` is an instance of Api (web/js/api.js) or any object with the same `floats(path)` method.
 // Both jobs must have succeeded and have images of the same size. ΔE₀₀ and ꟻLIP are computed by the
-// server (GET /v1/compare → service/image_metrics.py, the code regression runs use) from the spectral
+// server (GET /v1/compare → hgcore/image_metrics.py, the code regression runs use) from the spectral
 // bands at the exposure shown here; the tone map only changes how the two images are displayed.
 
 import { displayRgb8, TONE_MAPS } from "./imaging.js";

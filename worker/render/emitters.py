@@ -39,7 +39,7 @@ STRIDE = 14
 
 
 @dataclass
-class EmitterRecord:
+class EmitterGeometry:
     """Geometry of one emitter in world space (metres). ``axis`` is the cylinder axis or the disk/rectangle
     normal; ``up`` the rectangle's height direction."""
 
@@ -69,7 +69,7 @@ class EmitterRecord:
 class EmitterTable:
     """Emitter records indexed by the emitters' position in the Mitsuba scene."""
 
-    records: list[EmitterRecord] = field(default_factory=list)
+    records: list[EmitterGeometry] = field(default_factory=list)
 
     def flat(self) -> np.ndarray:
         rows = [record.as_row() for record in self.records] or [[0.0] * STRIDE]

@@ -52,7 +52,7 @@ from hgcore.artifacts.layout import K_REFERENCE_PER_M, BandLayout
 from hgcore.optics import sources
 from hgcore.optics.frames import transverse_frame_components
 from hgcore.optics.thin_film import film_shear
-from worker.mitsuba_setup import load_mitsuba
+from worker.mitsuba_setup import configured_mitsuba
 from worker.render import materials as mat
 from worker.render.bsdfs import (
     IncidentCoherence,
@@ -80,9 +80,9 @@ from worker.render.spectral import cie1931_xyz
 from worker.render.textures import TextureKernels
 from worker.render.wavelength_sampling import lane_weights
 
-# Python integrators subclass variant-specific classes: the variant must be chosen before this import
-# (``load_mitsuba`` honours HGRENDER_VARIANT; ``auto`` picks cuda_ad_spectral when a GPU is usable).
-mi = load_mitsuba()
+# Python integrators subclass variant-specific classes: the process's entry point chose the variant before
+# this import (``worker.mitsuba_setup.configure_mitsuba``, from its settings); importing changes nothing.
+mi = configured_mitsuba()
 OPS = drjit_ops()
 
 T = typing.TypeVar("T")
@@ -107,7 +107,7 @@ class RenderContext:
     spectra_flat: mi.Float
     shape_material: mi.UInt32  # shape registry id -> material index
     emitter_flat: mi.Float
-    emitter_index: mi.UInt32  # emitter registry id -> emitter record
+    emitter_index: mi.UInt32  # emitter registry id -> emitter row
     emitter_kinds: set
     # (n, m) -> ĉ of the universal expansions (Eq. 14) used for visibilities: uniform disks (spheres, disks,
     # scattering regions) and uniform rectangles (rectangles; cylinders: ``cylinder_modes`` where it is set).
@@ -190,7 +190,7 @@ class PathState:
 
 
 @loop_struct
-class PendingRecord:
+class PendingVertex:
     """A non-specular vertex waiting for the coherence of the light it receives (module docstring)."""
 
     pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
@@ -204,8 +204,8 @@ class PendingRecord:
 
 
 @loop_struct
-class PendingFilm:
-    """The thin film of a pending record (Eq. 18): its value waits for the resolved coherence."""
+class PendingCoating:
+    """The thin-film coating of a pending vertex (Eq. 18): its value waits for the resolved coherence."""
 
     pending: mi.Bool = field(default_factory=lambda: mi.Bool(False))
     transmitted: mi.Bool = field(default_factory=lambda: mi.Bool(False))
@@ -357,10 +357,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         self.kernels = MaterialKernels(params)
 
     # ------------------------------------------------------------------ coherence helpers
-    def _rect_modes(self, em_record: mi.UInt32, frame_x: mi.Vector3f, frame_y: mi.Vector3f):
+    def _rect_modes(self, emitter_row: mi.UInt32, frame_x: mi.Vector3f, frame_y: mi.Vector3f):
         """Per-lane ĉ of rectangle-like emitters seen in this frame (``emitters.emitter_rect_modes``)."""
         table, modes = self.context.emitter_flat, self.context.cylinder_modes
-        return emitter_rect_modes(mi, table, modes, em_record, frame_x, frame_y)
+        return emitter_rect_modes(mi, table, modes, emitter_row, frame_x, frame_y)
 
     def _frame_for(self, direction: mi.Vector3f) -> tuple[mi.Vector3f, mi.Vector3f]:
         x_axis, y_axis = transverse_frame_components(
@@ -406,11 +406,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         rays that leave the scene reach an emitter."""
         return EmitterKind.ENVIRONMENT in self.context.emitter_kinds
 
-    def _is_environment(self, em_record: mi.UInt32) -> mi.Bool:
+    def _is_environment(self, emitter_row: mi.UInt32) -> mi.Bool:
         """Lanes whose emitter is the environment (always False in scenes without one)."""
         if not self._has_environment():
             return mi.Bool(False)
-        return emitter_is_environment(mi, self.context.emitter_flat, em_record)
+        return emitter_is_environment(mi, self.context.emitter_flat, emitter_row)
 
     def _film_thickness_textured(self) -> bool:
         """Whether a film's thickness comes from a texture (the pending film then carries its local τ)."""
@@ -423,16 +423,16 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         return EmitterKind.SPHERE in self.context.emitter_kinds
 
     def _emitter_pdf(
-        self, scene: mi.Scene, mitsuba_pdf: mi.Float, em_record: mi.UInt32, distance_m: mi.Float | None
+        self, scene: mi.Scene, mitsuba_pdf: mi.Float, emitter_row: mi.UInt32, distance_m: mi.Float | None
     ) -> mi.Float:
-        """The solid-angle density of emitter sampling towards emitter ``em_record`` from a receiver
+        """The solid-angle density of emitter sampling towards emitter ``emitter_row`` from a receiver
         ``distance_m`` from its centre: Mitsuba's, except for spheres seen from outside, whose uniform cone
         has the density selection/Ω with Ω from ``emitters.sphere_solid_angle`` (Mitsuba's float32 cone
         pdf is 3 % high for a 1 mm sphere at 0.6 m and infinite below a/d ≈ 2.4e-4)."""
         if not self._has_sphere_emitters():
             return mitsuba_pdf  # (the select below would take Mitsuba's in every lane)
-        sphere, solid_angle = sphere_solid_angle(mi, self.context.emitter_flat, em_record, distance_m)
-        selection = scene.pdf_emitter(em_record, sphere)
+        sphere, solid_angle = sphere_solid_angle(mi, self.context.emitter_flat, emitter_row, distance_m)
+        selection = scene.pdf_emitter(emitter_row, sphere)
         return dr.select(sphere, selection / dr.maximum(solid_angle, 1e-30), mitsuba_pdf)
 
     def _screen_angle_terms(
@@ -485,13 +485,13 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         self,
         resolve: mi.Bool,
         vertex: Vertex,
-        em_record: mi.UInt32,
+        emitter_row: mi.UInt32,
         segment: mi.Float,
         ray_origin: mi.Point3f,
         wavelengths: mi.Spectrum,
         path: PathState,
-        record: PendingRecord,
-        film: PendingFilm,
+        record: PendingVertex,
+        coating: PendingCoating,
         first_vertex: FirstVertex,
     ) -> None:
         """Resolve the pending record in the lanes ``resolve``: its source is what the path reached — the
@@ -503,7 +503,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             mi,
             self.context.emitter_flat,
             self.context.emitter_kinds,
-            em_record,
+            emitter_row,
             record.frame_x,
             record.frame_y,
         )
@@ -515,13 +515,13 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             source_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
         # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
         # becomes the distance from the segment's origin to that centre.
-        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray_origin)
+        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, emitter_row, ray_origin)
         record.chain_distance = dr.select(
             vertex.hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
         )
         # The environment is a plane wave from the path's direction (Σ⊥ = 0, like one point of a secondary
         # source: the paths' directions sample its van Cittert–Zernike coherence), from "infinitely" far.
-        environment = vertex.hit_emitter & self._is_environment(em_record)
+        environment = vertex.hit_emitter & self._is_environment(emitter_row)
         if self._has_environment():
             record.chain_distance = dr.select(
                 environment, record.chain_distance - segment + FAR_DISTANCE_M, record.chain_distance
@@ -531,16 +531,18 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             record.chain_distance,
             record.frame_x,
             record.frame_y,
-            vertex.hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, em_record),
-            self._rect_modes(em_record, record.frame_x, record.frame_y),
+            vertex.hit_emitter & emitter_is_rect(mi, self.context.emitter_flat, emitter_row),
+            self._rect_modes(emitter_row, record.frame_x, record.frame_y),
         )
         if self.kernels.has(mat.INTERFERENCE_KINDS):
             # A symbolic branch: most resolved records are not a film's (the diffuse floor's), and packets
             # without a film lane skip the visibilities of every beam.
             path.beta = dr.if_stmt(
                 (path.beta,),
-                resolve & film.pending,
-                lambda beta: beta * self._film_factor(vertex, em_record, wavelengths, record, film, resolved),
+                resolve & coating.pending,
+                lambda beta: (
+                    beta * self._film_factor(vertex, emitter_row, wavelengths, record, coating, resolved)
+                ),
                 lambda beta: beta,
                 label="film_factor",
             )
@@ -560,10 +562,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
     def _film_factor(
         self,
         vertex: Vertex,
-        em_record: mi.UInt32,
+        emitter_row: mi.UInt32,
         wavelengths: mi.Spectrum,
-        record: PendingRecord,
-        film: PendingFilm,
+        record: PendingVertex,
+        coating: PendingCoating,
         resolved: IncidentCoherence,
     ) -> mi.Spectrum:
         """R(V)/R_incoherent of a pending film whose incident light is now ``resolved``: the path was
@@ -573,24 +575,24 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         An emitter reached straight from the film has its interference phase taken towards the emitter's
         centre (BRIEF), as in next-event estimation (the terms there: a symbolic branch, rarely taken);
         through mirrors, along the path."""
-        phase_terms = list(film.terms)
+        phase_terms = list(coating.terms)
         if not self.plane_waves:
-            centre_phase = vertex.hit_emitter & ~record.chain_specular & ~film.transmitted
-            centre_phase &= ~self._is_environment(em_record)  # its phase is the path's own direction
+            centre_phase = vertex.hit_emitter & ~record.chain_specular & ~coating.transmitted
+            centre_phase &= ~self._is_environment(emitter_row)  # its phase is the path's own direction
 
             def centre_terms(*_: mi.Spectrum) -> list[mi.Spectrum]:
                 table = self.context.emitter_flat
-                _, emitter_to_film = emitter_direction(mi, table, em_record, film.position)
-                cos_centre = -dr.dot(emitter_to_film, film.normal)
-                thickness = film.thickness if self._film_thickness_textured() else None
-                return list(self.kernels.film_terms(film.material, cos_centre, wavelengths, thickness))
+                _, emitter_to_film = emitter_direction(mi, table, emitter_row, coating.position)
+                cos_centre = -dr.dot(emitter_to_film, coating.normal)
+                thickness = coating.thickness if self._film_thickness_textured() else None
+                return list(self.kernels.film_terms(coating.material, cos_centre, wavelengths, thickness))
 
             def kept(*terms: mi.Spectrum) -> list[mi.Spectrum]:
                 return list(terms)
 
             phase_terms = dr.if_stmt(tuple(phase_terms), centre_phase, centre_terms, kept, label="centre")
         visibility = self.kernels.visibility
-        film_factor = film_reflectance(phase_terms, visibility, resolved, film.separation, wavelengths)
+        film_factor = film_reflectance(phase_terms, visibility, resolved, coating.separation, wavelengths)
         return film_factor / dr.maximum(phase_terms[0], 1e-12)
 
     @dr.syntax
@@ -601,8 +603,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         wo_world: mi.Vector3f,
         continue_path: mi.Bool,
         film_passthrough: mi.Bool,
-        record: PendingRecord,
-        film: PendingFilm,
+        record: PendingVertex,
+        coating: PendingCoating,
         first_vertex: FirstVertex,
     ) -> None:
         """Start a pending record at a non-specular vertex (its incident frame ⟂ the sampled direction; a
@@ -628,7 +630,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         if has_film:
             # Both the film's Dirac part and its lobe interfere (Eq. 18): defer either.
             is_film = new_record & self.kernels.is_kind(vertex.kind, mat.INTERFERENCE_KINDS)
-            film.pending = dr.select(new_record, is_film, film.pending)
+            coating.pending = dr.select(new_record, is_film, coating.pending)
             thickness = vertex.spectra.param(mat.FILM_THICKNESS_M)  # the local τ, from a texture
             # The shear between successive beams (docs/physics_interactions.md §3) for light arriving along
             # −wo: from the substrate (wo.z < 0; a transmitting film's frame is not flipped) the incident
@@ -640,14 +642,14 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             )
             film_ior = vertex.spectra[mat.FILM_IOR_ID][0]
             shear = film_shear(vertex.frame.n, -wo_world, thickness, film_ior, incident_ior, OPS)
-            film.separation = dr.select(is_film, mi.Vector3f(*shear), film.separation)
-            film.material = dr.select(is_film, vertex.material, film.material)
-            film.position = dr.select(is_film, vertex.si.p, film.position)
-            film.normal = dr.select(is_film, vertex.frame.n, film.normal)
+            coating.separation = dr.select(is_film, mi.Vector3f(*shear), coating.separation)
+            coating.material = dr.select(is_film, vertex.material, coating.material)
+            coating.position = dr.select(is_film, vertex.si.p, coating.position)
+            coating.normal = dr.select(is_film, vertex.frame.n, coating.normal)
             if self._film_thickness_textured():
-                film.thickness = dr.select(is_film, thickness, film.thickness)
-            film.transmitted = dr.select(is_film, sampled.film.transmitted, film.transmitted)
-            film.terms = dr.select(is_film, list(sampled.film.terms), list(film.terms))
+                coating.thickness = dr.select(is_film, thickness, coating.thickness)
+            coating.transmitted = dr.select(is_film, sampled.film.transmitted, coating.transmitted)
+            coating.terms = dr.select(is_film, list(sampled.film.terms), list(coating.terms))
         # Through a perfect mirror / refraction the carried vectors follow the beam.
         through_specular = continue_path & (vertex.specular | film_passthrough) & record.pending
         record.chain_specular = dr.select(new_record, False, record.chain_specular | through_specular)
@@ -657,8 +659,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         record.frame_y = dr.select(
             through_specular, _reflect_vector(record.frame_y, vertex.frame.n), record.frame_y
         )
-        film.separation = dr.select(
-            through_specular, _reflect_vector(film.separation, vertex.frame.n), film.separation
+        coating.separation = dr.select(
+            through_specular, _reflect_vector(coating.separation, vertex.frame.n), coating.separation
         )
         first_vertex.seen |= vertex.nonspecular
 
@@ -682,11 +684,11 @@ class HGPathIntegrator(mi.SamplingIntegrator):
     def _emitter_light(
         self,
         needed: mi.Bool,
-        em_record: mi.UInt32,
+        emitter_row: mi.UInt32,
         receiver: mi.Point3f,
         geometry: tuple[mi.Float, mi.Vector3f] | None,
     ) -> tuple[IncidentCoherence, CoherenceSample]:
-        """The coherence of the light of emitter ``em_record`` at ``receiver``, a distance r from its centre
+        """The coherence of the light of emitter ``emitter_row`` at ``receiver``, a distance r from its centre
         along the direction d (centre → receiver): Σ⊥ of its whole silhouette in a frame ⟂ d, computed
         only in the lanes ``needed`` (zero elsewhere), and the diagnostics' record of it.
 
@@ -703,14 +705,16 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             distance_m, direction = geometry
         if needed:
             if lazy:
-                distance_m, direction = emitter_direction(mi, self.context.emitter_flat, em_record, receiver)
+                distance_m, direction = emitter_direction(
+                    mi, self.context.emitter_flat, emitter_row, receiver
+                )
             frame_x, frame_y = self._frame_for(direction)
             sigma = emitter_coherence(
-                mi, self.context.emitter_flat, self.context.emitter_kinds, em_record, frame_x, frame_y
+                mi, self.context.emitter_flat, self.context.emitter_kinds, emitter_row, frame_x, frame_y
             )
             angle_terms = self._screen_angle_terms(*sigma, frame_x, frame_y)
-        is_rect = emitter_is_rect(mi, self.context.emitter_flat, em_record)
-        rect_modes = self._rect_modes(em_record, frame_x, frame_y)
+        is_rect = emitter_is_rect(mi, self.context.emitter_flat, emitter_row)
+        rect_modes = self._rect_modes(emitter_row, frame_x, frame_y)
         coherence = IncidentCoherence(*sigma, distance_m, frame_x, frame_y, is_rect, rect_modes)
         return coherence, self._coherence_sample(sigma, distance_m, angle_terms)
 
@@ -764,8 +768,10 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         # Loop state (Dr.Jit traverses each struct): the estimator, the pending coherence record and its
         # film, the first non-specular vertex, the diagnostics sums and the first-hit AOVs.
         path = PathState()
-        record = PendingRecord()
-        film = PendingFilm(terms=[mi.Spectrum(0.0) for _ in range(kernels.max_beams if has_film else 0)])
+        record = PendingVertex()
+        coating = PendingCoating(
+            terms=[mi.Spectrum(0.0) for _ in range(kernels.max_beams if has_film else 0)]
+        )
         first_vertex = FirstVertex()
         sums = DiagnosticSums()
         aov = FirstHit(material=mi.UInt32(self.context.black_material))
@@ -835,20 +841,29 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
             # ---------------------- Resolve the pending record: its source is what we reached ----
             resolve = record.pending & (hit_emitter | (nonspecular & ~film_passthrough))
-            em_record = self._emitter_lookup(emitter_ptr)
+            emitter_row = self._emitter_lookup(emitter_ptr)
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
                 self._resolve(
-                    resolve, vertex, em_record, segment, ray.o, wavelengths, path, record, film, first_vertex
+                    resolve,
+                    vertex,
+                    emitter_row,
+                    segment,
+                    ray.o,
+                    wavelengths,
+                    path,
+                    record,
+                    coating,
+                    first_vertex,
                 )
             record.pending &= ~resolve
-            film.pending &= ~resolve
+            coating.pending &= ~resolve
 
             # ---------------------- Emission reached by material sampling (MIS with NEE) ---------
             ds = mi.DirectionSample3f(scene, si=si, ref=path.prev_si)
             em_pdf = scene.pdf_emitter_direction(path.prev_si, ds, ~path.prev_delta)
-            hit_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, path.prev_si.p)
-            em_pdf = self._emitter_pdf(scene, em_pdf, em_record, hit_distance)
+            hit_distance, _ = emitter_direction(mi, self.context.emitter_flat, emitter_row, path.prev_si.p)
+            em_pdf = self._emitter_pdf(scene, em_pdf, emitter_row, hit_distance)
             mis = dr.select(path.prev_delta, 1.0, mis_weight(path.prev_pdf, em_pdf))
             mis = dr.select(path.prev_skip_emission, 0.0, mis)
             emitted = dr.select(hit_emitter, path.beta * mis * ds.emitter.eval(si, hit_emitter), 0.0)
@@ -929,7 +944,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             self._advance_throughput(path, bs, continue_path)
             path.eta = dr.select(continue_path, path.eta * bs.eta, path.eta)
             self._start_or_carry(
-                vertex, bs, wo_world, continue_path, film_passthrough, record, film, first_vertex
+                vertex, bs, wo_world, continue_path, film_passthrough, record, coating, first_vertex
             )
 
             path.prev_si = mi.Interaction3f(si)

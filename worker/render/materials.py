@@ -28,39 +28,34 @@ class MaterialKind(IntEnum):
     BLACK = 7  # emitter surfaces: absorb everything
 
 
-# Parameter offsets inside one record.
+# Parameter offsets inside one record. The statistical and diffractive parameters (roughness, PSD,
+# grating pitch, duty, pits, orders) are not here: they are compiled into the kernel as the constants of
+# the material's optics model (``MaterialRow.model``).
 KIND = 0
 REFLECTANCE_ID = 1  # diffuse reflectance spectrum
 ETA_ID = 2  # conductor n, dielectric / substrate index
 KAPPA_ID = 3  # conductor extinction κ (a zero spectrum for dielectrics)
 EXTERIOR_IOR = 4
-ROUGHNESS_RMS_M = 5
-CORRELATION_LENGTH_M = 6
-PSD_KIND = 7  # 0 Gaussian, 1 ABC (K-correlation)
-PSD_EXPONENT = 8
-SCATTERING_REGION_RADIUS_M = 9
-FILM_THICKNESS_M = 10
-FILM_IOR_ID = 11
-BEAMS = 12
-PITCH_X_M = 13
-PITCH_Y_M = 14  # 0 for a 1-D grating
-ORIENTATION_RAD = 15
-DUTY = 16
-PIT_DEPTH_M = 17
-PIT_IOR = 18
-LOBE_WIDTH_PER_M = 19
-MAX_ORDER = 20
-DISPERSIVE = 21  # 1 when the dielectric index varies with wavelength
-FILM_TRANSMITS = 22  # 1 for a thin film on a dielectric substrate (reflects and transmits)
-FILM_EXTINCTION = 23  # the film's extinction κ_f (constant over wavelength; 0: a clear film)
-TINT_ID = 24  # a conductor's colour tint spectrum (mirrors, rough conductors: 0 where there is none)
+SCATTERING_REGION_RADIUS_M = 5
+FILM_THICKNESS_M = 6
+FILM_IOR_ID = 7
+BEAMS = 8
+ORIENTATION_RAD = 9
+DISPERSIVE = 10  # 1 when the dielectric index varies with wavelength
+FILM_TRANSMITS = 11  # 1 for a thin film on a dielectric substrate (reflects and transmits)
+FILM_EXTINCTION = 12  # the film's extinction κ_f (constant over wavelength; 0: a clear film)
+# A rough surface's σ and ℓc: read by the kernels only where a texture gives them (``TEXTURE_BINDINGS``);
+# constant ones are compiled into the kernel with the rest of the material's ``RoughSurface`` model.
+ROUGHNESS_RMS_M = 13
+CORRELATION_LENGTH_M = 14
+TINT_ID = 15  # a conductor's colour tint spectrum (mirrors, rough conductors: 0 where there is none)
 # Texture bindings (``worker.render.textures``) of the textured parameters: binding + 1, 0 for none.
-TEX_REFLECTANCE = 25
-TEX_TINT = 26
-TEX_ROUGHNESS = 27
-TEX_CORRELATION = 28
-TEX_THICKNESS = 29
-STRIDE = 30
+TEX_REFLECTANCE = 16
+TEX_TINT = 17
+TEX_ROUGHNESS = 18
+TEX_CORRELATION = 19
+TEX_THICKNESS = 20
+STRIDE = 21
 
 #: The parameters a texture may give, and the offset of each one's binding. Colours (spectral ids) become
 #: the texture's upsampled spectra, scalars its values in SI units.
@@ -93,7 +88,7 @@ INTERFERENCE_KINDS = frozenset({MaterialKind.THIN_FILM})
 
 
 @dataclass
-class MaterialRecord:
+class MaterialRow:
     """One material: its kind, table values (offset -> value) and, for the statistical and diffractive
     kinds, the optics model object whose constants are compiled into the kernel
     (``hgcore.optics.rough_surface.RoughSurface`` or ``hgcore.optics.grating.BinaryGrating``)."""
@@ -120,14 +115,14 @@ class MaterialRecord:
 
 @dataclass
 class MaterialTable:
-    records: list[MaterialRecord] = field(default_factory=list)
+    records: list[MaterialRow] = field(default_factory=list)
 
-    def add(self, record: MaterialRecord) -> int:
+    def add(self, record: MaterialRow) -> int:
         self.records.append(record)
         return len(self.records) - 1
 
     def flat(self) -> np.ndarray:
-        rows = [record.as_row() for record in self.records] or [MaterialRecord(MaterialKind.BLACK).as_row()]
+        rows = [record.as_row() for record in self.records] or [MaterialRow(MaterialKind.BLACK).as_row()]
         return np.concatenate(rows)
 
     @property

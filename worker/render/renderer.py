@@ -36,7 +36,7 @@ import numpy as np
 
 from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums, column_count
 from hgcore.optics.sources import source_coefficients
-from worker.mitsuba_setup import load_mitsuba
+from worker.mitsuba_setup import configured_mitsuba
 from worker.render.bsdfs import MaterialKernels
 from worker.render.emitters import CylinderModes, EmitterKind
 from worker.render.integrator import RenderContext, register
@@ -122,8 +122,8 @@ def pass_seed(chunk_seed: int, pass_index: int) -> int:
 class Renderer:
     """One loaded Mitsuba scene plus the ``hg_path`` integrator attached to its tables."""
 
-    def __init__(self, compiled: CompiledScene, variant: str | None = None) -> None:
-        self.mi = mi = load_mitsuba(variant)
+    def __init__(self, compiled: CompiledScene) -> None:
+        self.mi = mi = configured_mitsuba()
         register()
         self.compiled = compiled
         # optimize=False: merged shapes would lose the ids that map them to materials.

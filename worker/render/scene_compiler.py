@@ -31,7 +31,7 @@ from schemas.photometry import emitter_radiance_scale, evaluate_spectrum
 from schemas.procedural import GENERATORS, generate_mesh
 from schemas.textures import ImageHeader, check_scene_images
 from worker.render import materials as mat
-from worker.render.emitters import FAR_DISTANCE_M, EmitterKind, EmitterRecord, EmitterTable
+from worker.render.emitters import FAR_DISTANCE_M, EmitterGeometry, EmitterKind, EmitterTable
 from worker.render.spectral import SpectralTable, grid_wavelengths_nm
 from worker.render.textures import TextureTable, coefficient_table, decode_image, uv_affine
 
@@ -175,17 +175,15 @@ class SceneCompiler:
         return rgb
 
     # ------------------------------------------------------------------ materials
-    def _material_record(
-        self, material: Any, spectra_table: SpectralTable
-    ) -> tuple[mat.MaterialRecord, dict]:
+    def _material_record(self, material: Any, spectra_table: SpectralTable) -> tuple[mat.MaterialRow, dict]:
         grid = self.grid_nm
         values: dict[int, float] = {}
         ranges: dict[int, tuple[float, float]] = {}
         if getattr(material, "scattering_region_radius_m", None) is not None:
             values[mat.SCATTERING_REGION_RADIUS_M] = material.scattering_region_radius_m
 
-        def record(kind: mat.MaterialKind, surface: Any = None) -> mat.MaterialRecord:
-            return mat.MaterialRecord(kind, values, surface, ranges)
+        def record(kind: mat.MaterialKind, surface: Any = None) -> mat.MaterialRow:
+            return mat.MaterialRow(kind, values, surface, ranges)
 
         def tint(m: Any) -> None:
             if isinstance(m.tint, model.ImageTexture):
@@ -401,17 +399,17 @@ class SceneCompiler:
         params.update()
         return mesh
 
-    def _emitter(self, emitter: Any, film: model.Film) -> tuple[dict[str, Any], EmitterRecord, float]:
+    def _emitter(self, emitter: Any, film: model.Film) -> tuple[dict[str, Any], EmitterGeometry, float]:
         """Mitsuba shape dict (without the emitter), the coherence record and the emitting area (m²)."""
         kind = emitter.type
         if kind == "sphere":
-            record = EmitterRecord(EmitterKind.SPHERE, tuple(emitter.center_m), radius_m=emitter.radius_m)
+            record = EmitterGeometry(EmitterKind.SPHERE, tuple(emitter.center_m), radius_m=emitter.radius_m)
             shape = {"type": "sphere", "center": list(emitter.center_m), "radius": emitter.radius_m}
             return shape, record, 4 * math.pi * emitter.radius_m**2
         if kind == "cylinder":
             p0, p1 = np.asarray(emitter.p0_m), np.asarray(emitter.p1_m)
             length = float(np.linalg.norm(p1 - p0))
-            record = EmitterRecord(
+            record = EmitterGeometry(
                 EmitterKind.CYLINDER,
                 tuple(((p0 + p1) / 2).tolist()),
                 axis=tuple(((p1 - p0) / length).tolist()),
@@ -424,7 +422,7 @@ class SceneCompiler:
             normal = _normalized(emitter.normal)
             up = np.asarray(emitter.up, dtype=float) - np.dot(emitter.up, normal) * normal
             up /= np.linalg.norm(up)
-            record = EmitterRecord(
+            record = EmitterGeometry(
                 EmitterKind.RECTANGLE,
                 tuple(emitter.center_m),
                 axis=tuple(normal.tolist()),
@@ -439,7 +437,7 @@ class SceneCompiler:
             return shape, record, emitter.width_m * emitter.height_m
         if kind == "disk":
             normal = _normalized(emitter.normal)
-            record = EmitterRecord(
+            record = EmitterGeometry(
                 EmitterKind.DISK,
                 tuple(emitter.center_m),
                 axis=tuple(normal.tolist()),
@@ -456,7 +454,7 @@ class SceneCompiler:
             half_angle = math.radians(emitter.angular_diameter_deg) / 2.0
             radius = SUN_DISTANCE_M * math.sin(half_angle)
             center = tuple((direction * SUN_DISTANCE_M).tolist())
-            record = EmitterRecord(EmitterKind.SPHERE, center, radius_m=radius)
+            record = EmitterGeometry(EmitterKind.SPHERE, center, radius_m=radius)
             shape = {"type": "sphere", "center": list(center), "radius": radius}
             return shape, record, 4 * math.pi * radius**2
         raise InputError(f"emitters: type {kind!r} is not supported by the renderer")
@@ -553,7 +551,7 @@ class SceneCompiler:
                 conductor = record.kind in (mat.MaterialKind.MIRROR, mat.MaterialKind.ROUGH_CONDUCTOR)
                 if conductor and mat.TINT_ID not in record.values:
                     record.values[mat.TINT_ID] = spectral_table.add_constant(1.0)
-        black_index = material_table.add(mat.MaterialRecord(mat.MaterialKind.BLACK))
+        black_index = material_table.add(mat.MaterialRow(mat.MaterialKind.BLACK))
 
         hg_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
         reference_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
@@ -578,7 +576,7 @@ class SceneCompiler:
         for index, emitter in enumerate(scene.emitters):
             if isinstance(emitter, model.EnvironmentEmitter):
                 environment_record = len(emitter_table.records)
-                emitter_table.records.append(EmitterRecord(EmitterKind.ENVIRONMENT, (0.0, 0.0, 0.0)))
+                emitter_table.records.append(EmitterGeometry(EmitterKind.ENVIRONMENT, (0.0, 0.0, 0.0)))
                 hg_dict["environment"] = reference_dict["environment"] = self._environment(emitter, index)
                 continue
             key = f"emitter_{index}"

@@ -10,13 +10,13 @@ from __future__ import annotations
 from datetime import UTC, datetime
 
 import redis
-from fastapi import APIRouter, Request
+from fastapi import APIRouter
 from fastapi.responses import JSONResponse, PlainTextResponse
 from rq.utils import utcparse
 from rq.worker_registration import REDIS_WORKER_KEYS
 
 from hgcore.settings import Settings
-from service.api.deps import JobsDep, RedisDep, SettingsDep, StoreDep
+from service.api.deps import JobsDep, LatencyDep, RedisDep, SettingsDep, StoreDep
 from service.metrics import render_metrics
 
 router = APIRouter(tags=["health"])
@@ -79,6 +79,6 @@ def readyz(client: RedisDep, store: StoreDep, settings: SettingsDep) -> JSONResp
     response_class=PlainTextResponse,
     responses={200: {"content": {"text/plain": {}}}},
 )
-def metrics(request: Request, client: RedisDep, jobs: JobsDep) -> PlainTextResponse:
-    text = render_metrics(client, jobs, request.app.state.latency)
+def metrics(client: RedisDep, jobs: JobsDep, latency: LatencyDep) -> PlainTextResponse:
+    text = render_metrics(client, jobs, latency)
     return PlainTextResponse(text, media_type="text/plain; version=0.0.4; charset=utf-8")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Path, Query, Request, Response, status
+from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import StreamingResponse
 from sse_starlette import EventSourceResponse
 from starlette.concurrency import run_in_threadpool
@@ -18,7 +18,18 @@ from hgcore.jobs.views import JobView
 from hgcore.noise_target import NoiseTarget
 from hgcore.settings import SceneLimits
 from hgcore.store.base import ArtifactNotFoundError, validate_key
-from service.api.deps import JobsDep, Reader, StoreDep, Submitter, ensure_visible, visible_job
+from service.api.deps import (
+    AsyncRedisDep,
+    JobId,
+    JobsDep,
+    Reader,
+    SettingsDep,
+    StoreDep,
+    Submitter,
+    ensure_visible,
+    visible_job,
+)
+from service.api.openapi import JOB_ERRORS, form_fields_schema, problems, request_body
 from service.events import job_events
 from service.models import (
     ArtifactList,
@@ -27,42 +38,22 @@ from service.models import (
     JobCreated,
     JobList,
     JobOptions,
-    Problem,
 )
 from service.submissions import scene_from_json, scene_from_upload
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
-JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="Job id (32 hex digits).")]
-_ERRORS: dict[int | str, dict[str, Any]] = {
-    401: {"model": Problem, "description": "Missing or invalid token."},
-    403: {"model": Problem, "description": "Token lacks the scope."},
-    404: {"model": Problem, "description": "No such job (or another owner's)."},
-    429: {"model": Problem, "description": "Rate limit exceeded."},
-}
-_MULTIPART_SCHEMA = {
-    "type": "object",
-    "required": ["scene"],
-    "properties": {
-        "scene": {"type": "string", "format": "binary", "description": ".json, .usda/.usdc/.usdz or .zip"},
-        "priority": {"type": "string", "enum": ["high", "normal", "low"]},
-        "spp": {"type": "integer", "minimum": 1},
-        "chunks": {"type": "integer", "minimum": 1},
-        "seed": {"type": "integer", "minimum": 0},
-        "integrator": {"type": "string", "enum": ["hg_path", "rlt"]},
-        "target_rel_error": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1},
-        "time_budget_s": {"type": "number", "exclusiveMinimum": 0},
-        "target_quantile": {"type": "number", "exclusiveMinimum": 0, "maximum": 1},
-        "idempotency_key": {"type": "string"},
-        "name": {"type": "string"},
-    },
-}
+_MULTIPART_SCHEMA = form_fields_schema(
+    JobOptions,
+    scene={"type": "string", "format": "binary", "description": ".json, .usda/.usdc/.usdz or .zip"},
+)
 _MULTIPART_EXAMPLE = {"scene": "scene.usda", "priority": "normal", "spp": 64, "chunks": 4, "name": "usd box"}
 
 
-async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str, bytes], JobOptions]:
+async def _parse_submission(
+    request: Request, limits: SceneLimits
+) -> tuple[dict[str, Any], dict[str, bytes], JobOptions]:
     """Body → (validated scene, bundle files, options); raises SceneError/ValidationError/ValueError."""
-    limits: SceneLimits = request.app.state.scene_limits
     content_type = request.headers.get("content-type", "")
     if content_type.startswith("multipart/form-data"):
         form = await request.form(max_files=1, max_fields=16)
@@ -90,28 +81,29 @@ async def _parse_submission(request: Request) -> tuple[dict[str, Any], dict[str,
     response_model=JobCreated,
     summary="Submit a render job",
     responses={
-        **_ERRORS,
+        **JOB_ERRORS,
         200: {"model": JobCreated, "description": "An earlier job with the same idempotency_key."},
-        413: {"model": Problem, "description": "Body too large."},
-        422: {"model": Problem, "description": "Invalid request or scene; `errors` lists JSON pointers."},
+        **problems(
+            request_entity_too_large="Body too large.",
+            unprocessable_entity="Invalid request or scene; `errors` lists JSON pointers.",
+        ),
     },
-    openapi_extra={
-        "requestBody": {
-            "required": True,
-            "content": {
-                # Inlined: the route reads the body itself (JSON or multipart), so FastAPI registers no
-                # component for JobCreate. Its schema has no nested definitions to resolve.
-                "application/json": {"schema": JobCreate.model_json_schema()},
-                "multipart/form-data": {"schema": _MULTIPART_SCHEMA, "example": _MULTIPART_EXAMPLE},
-            },
+    openapi_extra=request_body(
+        {
+            # Inlined: the route reads the body itself (JSON or multipart), so FastAPI registers no
+            # component for JobCreate. Its schema has no nested definitions to resolve.
+            "application/json": {"schema": JobCreate.model_json_schema()},
+            "multipart/form-data": {"schema": _MULTIPART_SCHEMA, "example": _MULTIPART_EXAMPLE},
         }
-    },
+    ),
 )
-async def submit_job(request: Request, response: Response, jobs: JobsDep, principal: Submitter) -> JobCreated:
+async def submit_job(
+    request: Request, response: Response, jobs: JobsDep, settings: SettingsDep, principal: Submitter
+) -> JobCreated:
     """Validate the scene (JSON body `{"scene": ...}` or a multipart file `scene`), store it, split it
     into chunks and enqueue them with a dependent merge step. Invalid input is rejected before anything
     is stored or enqueued."""
-    scene, files, options = await _parse_submission(request)
+    scene, files, options = await _parse_submission(request, settings)  # a process's settings are its limits
     view, created = await run_in_threadpool(
         lambda: jobs.create(
             scene,
@@ -131,7 +123,7 @@ async def submit_job(request: Request, response: Response, jobs: JobsDep, princi
     return JobCreated(id=view.id, status=view.status)
 
 
-@router.get("", response_model=JobList, summary="List jobs", responses=_ERRORS)
+@router.get("", response_model=JobList, summary="List jobs", responses=JOB_ERRORS)
 def list_jobs(
     jobs: JobsDep,
     principal: Reader,
@@ -145,7 +137,7 @@ def list_jobs(
     return JobList(items=items, total=total, offset=offset, limit=limit)
 
 
-@router.get("/{job_id}", response_model=JobView, summary="Job status and progress", responses=_ERRORS)
+@router.get("/{job_id}", response_model=JobView, summary="Job status and progress", responses=JOB_ERRORS)
 async def get_job(job_id: JobId, jobs: JobsDep, principal: Reader) -> Response:
     view = ensure_visible(await jobs.aget(job_id), principal, job_id)
     # Already a validated model: serialise once instead of FastAPI's re-validation of the return value.
@@ -156,7 +148,7 @@ async def get_job(job_id: JobId, jobs: JobsDep, principal: Reader) -> Response:
     "/{job_id}/cancel",
     response_model=JobView,
     summary="Cancel a job",
-    responses={**_ERRORS, 409: {"model": Problem, "description": "Job already finished."}},
+    responses=JOB_ERRORS | problems(conflict="Job already finished."),
 )
 def cancel_job(job_id: JobId, jobs: JobsDep, principal: Submitter) -> JobView:
     """Queued chunks are dropped, running ones stop within seconds; the job reads `canceled`."""
@@ -168,7 +160,7 @@ def cancel_job(job_id: JobId, jobs: JobsDep, principal: Submitter) -> JobView:
     "/{job_id}",
     status_code=status.HTTP_204_NO_CONTENT,
     summary="Delete a job and its artifacts",
-    responses=_ERRORS,
+    responses=JOB_ERRORS,
 )
 def delete_job(job_id: JobId, jobs: JobsDep, principal: Submitter) -> Response:
     visible_job(jobs, principal, job_id)
@@ -203,7 +195,7 @@ _SSE_EXAMPLE = (
     summary="Follow a job (Server-Sent Events)",
     response_class=EventSourceResponse,
     responses={
-        **_ERRORS,
+        **JOB_ERRORS,
         200: {
             "content": {"text/event-stream": {"schema": _SSE_EVENT_SCHEMA, "example": _SSE_EXAMPLE}},
             "description": "`status` and `progress` events (`data:` is JSON) until a final status.",
@@ -211,15 +203,17 @@ _SSE_EXAMPLE = (
     },
 )
 async def job_event_stream(
-    request: Request, job_id: JobId, jobs: JobsDep, principal: Reader
+    request: Request, job_id: JobId, jobs: JobsDep, aredis: AsyncRedisDep, principal: Reader
 ) -> EventSourceResponse:
     """`status` events carry the full job view (first one immediately); `progress` events carry
     `progress`, `chunks_done`, `chunks_total`, `eta_s`. The stream ends after a final status."""
     await run_in_threadpool(visible_job, jobs, principal, job_id)
-    return EventSourceResponse(job_events(request, request.app.state.aredis, jobs, job_id), ping=5)
+    return EventSourceResponse(job_events(request, aredis, jobs, job_id), ping=5)
 
 
-@router.get("/{job_id}/artifacts", response_model=ArtifactList, summary="List artifacts", responses=_ERRORS)
+@router.get(
+    "/{job_id}/artifacts", response_model=ArtifactList, summary="List artifacts", responses=JOB_ERRORS
+)
 def list_artifacts(job_id: JobId, jobs: JobsDep, store: StoreDep, principal: Reader) -> ArtifactList:
     """Final artifacts (image.exr, preview.png, summary.json, worker.log, manifest.json, ...) and the
     job's inputs and chunk partials, with sizes and download URLs."""
@@ -245,7 +239,7 @@ _BINARY = {"schema": {"type": "string", "format": "binary"}}
     summary="Download an artifact",
     response_class=StreamingResponse,
     responses={
-        **_ERRORS,
+        **JOB_ERRORS,
         200: {
             # Every type an artifact is sent as (by its suffix): image.exr/variance.exr are spectral
             # OpenEXR (`image/x-exr`), preview.png PNG, summary/manifest JSON, worker.log text, chunk

@@ -5,16 +5,13 @@ Thin: the work happens in ``service.regression``."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 from fastapi.responses import Response as RawResponse
 
-from hgcore.jobs.records import JobNotFoundError
-from service.api.deps import Reader, Submitter
-from service.auth import Principal
-from service.models import Problem
-from service.regression.models import (
+from hgcore.jobs.lifecycle import JobNotFoundError
+from hgcore.regression.models import (
     BaselineList,
     BaselineView,
     PromoteRequest,
@@ -26,9 +23,7 @@ from service.regression.models import (
     ScheduleView,
     Suite,
 )
-from service.regression.runs import RunService
-from service.regression.scheduler import next_run_times
-from service.regression.store import (
+from hgcore.regression.store import (
     BASELINE_FILES,
     BaselineNotFoundError,
     RegressionStore,
@@ -36,22 +31,25 @@ from service.regression.store import (
     ScheduleNotFoundError,
     run_series,
 )
+from service.api.deps import JobsDep, Reader, RedisDep, SettingsDep, StoreDep, Submitter
+from service.api.openapi import AUTH_ERRORS, problems
+from service.auth import Principal
+from service.regression.runs import RunService
+from service.regression.scheduler import next_run_times
 
 router = APIRouter(prefix="/v1", tags=["regression"])
 
 ScheduleId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="Schedule id (32 hex digits).")]
 RunId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="Run id (32 hex digits).")]
 SceneName = Annotated[str, Path(pattern=r"^[A-Za-z0-9._-]{1,100}$", description="Scene key of a suite.")]
-_ERRORS: dict[int | str, dict[str, Any]] = {
-    401: {"model": Problem, "description": "Missing or invalid token."},
-    403: {"model": Problem, "description": "Token lacks the scope."},
-    404: {"model": Problem, "description": "No such schedule, run or baseline (or another owner's)."},
-}
+_ERRORS = AUTH_ERRORS | problems(not_found="No such schedule, run or baseline (or another owner's).")
 
 
-def _runs(request: Request) -> RunService:
-    state = request.app.state
-    return RunService(state.jobs, RegressionStore(state.redis, state.store), state.settings)
+def _runs(jobs: JobsDep, client: RedisDep, store: StoreDep, settings: SettingsDep) -> RunService:
+    return RunService(jobs, RegressionStore(client, store), settings)
+
+
+RunsDep = Annotated[RunService, Depends(_runs)]
 
 
 def _schedule(runs: RunService, principal: Principal, schedule_id: str) -> ScheduleView:
@@ -86,16 +84,14 @@ def _check_suite(runs: RunService, principal: Principal, suite: Suite) -> None:
 
 
 @router.post("/schedules", status_code=status.HTTP_201_CREATED, responses=_ERRORS, tags=["regression"])
-def create_schedule(body: ScheduleCreate, request: Request, principal: Submitter) -> ScheduleView:
+def create_schedule(body: ScheduleCreate, runs: RunsDep, principal: Submitter) -> ScheduleView:
     """Create a schedule (its scenes are validated first); the scheduler picks it up within a second."""
-    runs = _runs(request)
     _check_suite(runs, principal, body.suite)
     return runs.regression.create_schedule(body, principal.owner)
 
 
 @router.get("/schedules", responses=_ERRORS)
-def list_schedules(request: Request, principal: Reader) -> ScheduleList:
-    runs = _runs(request)
+def list_schedules(runs: RunsDep, principal: Reader) -> ScheduleList:
     next_at = next_run_times(runs.jobs.client)
     items = [
         s.model_copy(update={"next_run_at": next_at.get(s.id)})
@@ -106,38 +102,34 @@ def list_schedules(request: Request, principal: Reader) -> ScheduleList:
 
 
 @router.get("/schedules/{schedule_id}", responses=_ERRORS)
-def get_schedule(schedule_id: ScheduleId, request: Request, principal: Reader) -> ScheduleView:
-    return _schedule(_runs(request), principal, schedule_id)
+def get_schedule(schedule_id: ScheduleId, runs: RunsDep, principal: Reader) -> ScheduleView:
+    return _schedule(runs, principal, schedule_id)
 
 
 @router.delete("/schedules/{schedule_id}", status_code=status.HTTP_204_NO_CONTENT, responses=_ERRORS)
-def delete_schedule(schedule_id: ScheduleId, request: Request, principal: Submitter) -> Response:
+def delete_schedule(schedule_id: ScheduleId, runs: RunsDep, principal: Submitter) -> Response:
     """Delete the schedule (its runs and baselines stay)."""
-    runs = _runs(request)
     _schedule(runs, principal, schedule_id)
     runs.regression.delete_schedule(schedule_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.post("/schedules/{schedule_id}/pause", responses=_ERRORS)
-def pause_schedule(schedule_id: ScheduleId, request: Request, principal: Submitter) -> ScheduleView:
+def pause_schedule(schedule_id: ScheduleId, runs: RunsDep, principal: Submitter) -> ScheduleView:
     """Stop firing; due times during the pause are skipped."""
-    runs = _runs(request)
     _schedule(runs, principal, schedule_id)
     return runs.regression.set_paused(schedule_id, True)
 
 
 @router.post("/schedules/{schedule_id}/resume", responses=_ERRORS)
-def resume_schedule(schedule_id: ScheduleId, request: Request, principal: Submitter) -> ScheduleView:
-    runs = _runs(request)
+def resume_schedule(schedule_id: ScheduleId, runs: RunsDep, principal: Submitter) -> ScheduleView:
     _schedule(runs, principal, schedule_id)
     return runs.regression.set_paused(schedule_id, False)
 
 
 @router.post("/schedules/{schedule_id}/run", status_code=status.HTTP_202_ACCEPTED, responses=_ERRORS)
-def run_schedule_now(schedule_id: ScheduleId, request: Request, principal: Submitter) -> RunView:
+def run_schedule_now(schedule_id: ScheduleId, runs: RunsDep, principal: Submitter) -> RunView:
     """Start a run of the schedule's suite now (outside its timetable)."""
-    runs = _runs(request)
     schedule = _schedule(runs, principal, schedule_id)
     return runs.start_run(
         schedule.suite,
@@ -151,21 +143,19 @@ def run_schedule_now(schedule_id: ScheduleId, request: Request, principal: Submi
 @router.get("/schedules/{schedule_id}/runs", responses=_ERRORS)
 def list_schedule_runs(
     schedule_id: ScheduleId,
-    request: Request,
+    runs: RunsDep,
     principal: Reader,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
 ) -> RunList:
     """Runs, newest first, and per-scene metric series (oldest first) for trend plots."""
-    runs = _runs(request)
     _schedule(runs, principal, schedule_id)
     items = runs.regression.list_runs(schedule_id, limit)
     return RunList(items=items, series=run_series(items))
 
 
 @router.post("/runs", status_code=status.HTTP_202_ACCEPTED, responses=_ERRORS)
-def create_run(body: RunCreate, request: Request, principal: Submitter) -> RunView:
+def create_run(body: RunCreate, runs: RunsDep, principal: Submitter) -> RunView:
     """Run a suite once against the current baselines (no schedule); follow it with ``GET /v1/runs/{id}``."""
-    runs = _runs(request)
     _check_suite(runs, principal, body.suite)
     return runs.start_run(
         body.suite,
@@ -176,14 +166,13 @@ def create_run(body: RunCreate, request: Request, principal: Submitter) -> RunVi
 
 
 @router.get("/runs/{run_id}", responses=_ERRORS)
-def get_run(run_id: RunId, request: Request, principal: Reader) -> RunView:
-    return _run(_runs(request), principal, run_id)
+def get_run(run_id: RunId, runs: RunsDep, principal: Reader) -> RunView:
+    return _run(runs, principal, run_id)
 
 
 @router.post("/baselines", status_code=status.HTTP_201_CREATED, responses=_ERRORS)
-def promote_baseline(body: PromoteRequest, request: Request, principal: Submitter) -> list[BaselineView]:
+def promote_baseline(body: PromoteRequest, runs: RunsDep, principal: Submitter) -> list[BaselineView]:
     """Make a finished job (for ``scene``) or every scene of a finished run the new baseline version."""
-    runs = _runs(request)
     if body.run_id is not None:
         run = _run(runs, principal, body.run_id)
         pairs = [(r.scene, r.job_id) for r in run.scenes if r.job_id]
@@ -197,29 +186,29 @@ def promote_baseline(body: PromoteRequest, request: Request, principal: Submitte
 
 
 @router.get("/baselines/{scene}", responses=_ERRORS)
-def list_baselines(scene: SceneName, request: Request, principal: Reader) -> BaselineList:
-    return _runs(request).regression.baselines(scene)
+def list_baselines(scene: SceneName, runs: RunsDep, principal: Reader) -> BaselineList:
+    return runs.regression.baselines(scene)
 
 
 @router.post("/baselines/{scene}/current", responses=_ERRORS)
 def set_current_baseline(
-    scene: SceneName, request: Request, principal: Submitter, version: Annotated[int, Query(ge=1)]
+    scene: SceneName, runs: RunsDep, principal: Submitter, version: Annotated[int, Query(ge=1)]
 ) -> BaselineView:
     """Roll the scene's baseline back (or forward) to ``version``."""
     try:
-        return _runs(request).regression.set_current_baseline(scene, version)
+        return runs.regression.set_current_baseline(scene, version)
     except BaselineNotFoundError:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"version: {scene} has no v{version}") from None
 
 
 @router.get("/baselines/{scene}/{version}/{name}", responses=_ERRORS)
 def download_baseline_file(
-    scene: SceneName, version: Annotated[int, Path(ge=1)], name: str, request: Request, principal: Reader
+    scene: SceneName, version: Annotated[int, Path(ge=1)], name: str, runs: RunsDep, principal: Reader
 ) -> RawResponse:
     if name not in BASELINE_FILES:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"name: must be one of {list(BASELINE_FILES)}")
     try:
-        data = _runs(request).regression.baseline_file(scene, version, name)
+        data = runs.regression.baseline_file(scene, version, name)
     except BaselineNotFoundError:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"version: {scene} has no v{version}") from None
     media = "application/json" if name.endswith(".json") else "image/x-exr"

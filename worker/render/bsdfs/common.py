@@ -278,7 +278,7 @@ class Material:
     A *table* kind (``per_material = False``: diffuse, mirror, smooth dielectric) reads everything from the
     material table and compiles one branch for all its materials; a *model* kind (rough conductor, rough
     dielectric, thin film, grating) compiles one branch per material with the constants of its optics
-    model (``model``, the record's ``MaterialRecord.model``) built in. ``MaterialKernels`` (``dispatch``)
+    model (``model``, the record's ``MaterialRow.model``) built in. ``MaterialKernels`` (``dispatch``)
     selects the branch of each lane with ``selects``.
     """
 
@@ -300,7 +300,7 @@ class Material:
         return []
 
     @property
-    def record(self) -> mat.MaterialRecord:
+    def record(self) -> mat.MaterialRow:
         assert self.index is not None, "table kinds have no single record"
         return self.params.materials.records[self.index]
 

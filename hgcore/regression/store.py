@@ -24,8 +24,8 @@ import redis
 from hgcore.artifacts.keys import job_prefix
 from hgcore.artifacts.layout import IMAGE_EXR, SUMMARY_JSON, VARIANCE_EXR
 from hgcore.errors import InputError
+from hgcore.regression.models import BaselineList, BaselineView, RunView, ScheduleCreate, ScheduleView
 from hgcore.store.base import ArtifactNotFoundError, ArtifactStore
-from service.regression.models import BaselineList, BaselineView, RunView, ScheduleCreate, ScheduleView
 
 _PREFIX = "hgrender:regression:"
 _SCHEDULE_KEY = _PREFIX + "schedule:{}"

@@ -22,7 +22,7 @@ Gaussian statistics):
 * Colour. Both images at one exposure, the EV that maps the baseline's 99th-percentile luminance to white
   (``exposure_ev``, stored with the metrics; the compare view opens at it): per-pixel CIEDE2000 ΔE₀₀ of
   band spectra → CIE 1931 XYZ → CIELAB, and per-pixel ꟻLIP of the displayed images
-  (``service.image_metrics``, the same code as the compare view): mean, p95, max. Noise alone gives large
+  (``hgcore.image_metrics``, the same code as the compare view): mean, p95, max. Noise alone gives large
   values at few spp, so their level is estimated by a parametric bootstrap: the metric between a and
   a + ε √(v_a + v_c) (ε ~ N(0, 1) per pixel and band, clipped at 0, four draws, fixed seed) gives
   ``p95_noise``/``mean_noise``; ΔE₀₀'s p95 − p95_noise fails if > ``max_delta_e00_p95`` and ꟻLIP's
@@ -40,9 +40,9 @@ from typing import Any
 
 import numpy as np
 
-from service.image_metrics import map_statistics, metric_exposure_ev, perceptual_map
-from service.regression.images import COHERENCE_METRIC_CHANNELS, RenderOutputs
-from service.regression.models import Thresholds
+from hgcore.image_metrics import map_statistics, metric_exposure_ev, perceptual_map
+from hgcore.regression.images import COHERENCE_METRIC_CHANNELS, RenderOutputs
+from hgcore.regression.models import Thresholds
 
 NOISE_DRAWS = 4
 """Bootstrap draws of the ΔE₀₀ and ꟻLIP noise levels (4 × the pixel count samples their 95th percentile)."""
@@ -108,7 +108,7 @@ def perceptual_metrics(
     metric: str, baseline: RenderOutputs, current: RenderOutputs, exposure_ev: float
 ) -> dict[str, float]:
     """Per-pixel ``de2000`` (ΔE₀₀) or ``flip`` (ꟻLIP) statistics of the two spectral images at
-    ``exposure_ev`` (``service.image_metrics``, the compare view's code), with the noise level.
+    ``exposure_ev`` (``hgcore.image_metrics``, the compare view's code), with the noise level.
 
     Noise alone gives large values at few spp, so the level is estimated by a parametric bootstrap: the
     metric between a and a + ε √(v_a + v_c) (ε ~ N(0, 1) per pixel and band, clipped at 0, four draws,

@@ -1,6 +1,6 @@
 """Per-pixel perceptual differences of two spectral images, at one exposure: CIEDE2000 ΔE₀₀ and ꟻLIP.
 
-The one implementation behind the regression run's colour metrics (``service.regression.metrics``), the
+The one implementation behind the regression run's colour metrics (``hgcore.regression.metrics``), the
 viewer's compare view and the regression dashboard (``GET /v1/compare``, ``service.viewer_data``), so that
 a ΔE₀₀ p95 stored by a run is the number the compare view shows for the same two jobs.
 

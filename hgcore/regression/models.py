@@ -3,7 +3,7 @@
 A *suite* lists scenes (an example of ``schemas/examples``, the stored scene of an earlier job, or an inline
 scene document) with film overrides and pass/fail thresholds; a *schedule* runs a suite on a 5-field cron
 expression (in a time zone) or every ``interval_s`` seconds; each run renders every scene and compares it
-with the scene's current baseline (``service.regression.metrics``).
+with the scene's current baseline (``hgcore.regression.metrics``).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The renderer's public interface: plan chunks, render a chunk, merge chunks, render a whole scene.
+"""Chunked rendering, the renderer's public interface: plan chunks, render a chunk, merge chunks, render a
+whole scene (the local render is the plan of one chunk, or K with --chunks).
 
 A render of S samples per pixel with seed s splits into K chunks of ⌈S/K⌉ or ⌊S/K⌋ spp with distinct
 derived seeds (``plan_chunks``). The image renders in tiles (row bands, ``Renderer.tiles``) whose samples
@@ -30,7 +31,8 @@ from hgcore.artifacts.running_sums import RunningSums
 from hgcore.errors import InputError
 from hgcore.noise_target import ImageErrors, NoiseTarget
 from schemas.scene import ABSOLUTE_MAX_SPP, Scene
-from schemas.validation import validate_scene
+from schemas.validation import with_film_overrides
+from worker.mitsuba_setup import configured_mitsuba
 from worker.render.renderer import Renderer, tile_bands
 from worker.render.scene_compiler import SceneCompiler
 from worker.render.wavelength_sampling import sampling_mode
@@ -68,20 +70,14 @@ def plan_chunks(total_spp: int, chunk_count: int, base_seed: int) -> list[ChunkS
     ]
 
 
-def as_scene(scene: Scene | dict[str, Any]) -> Scene:
-    return scene if isinstance(scene, Scene) else validate_scene(scene)
-
-
 _renderers: dict[str, Renderer] = {}
 
 
 def renderer_for(scene: Scene, bundle_dir: Path | None = None) -> Renderer:
     """A Renderer for ``scene``, reused within a process for identical scenes (load once, kernels cached)."""
-    from worker.mitsuba_setup import load_mitsuba
-
     key = scene.model_dump_json(by_alias=True) + str(bundle_dir)
     if key not in _renderers:
-        compiled = SceneCompiler(load_mitsuba(), bundle_dir).compile(scene)
+        compiled = SceneCompiler(configured_mitsuba(), bundle_dir).compile(scene)
         _renderers.clear()  # one scene at a time keeps worker memory bounded
         _renderers[key] = Renderer(compiled)
     return _renderers[key]
@@ -146,7 +142,7 @@ def render_tiles(
 
 
 def render_chunk(
-    scene: Scene | dict[str, Any],
+    scene: Scene,
     chunk: ChunkSpec,
     out_path: Path,
     *,
@@ -156,10 +152,9 @@ def render_chunk(
 ) -> dict[str, Any]:
     """Render one chunk and stream its per-pixel sums, tile by tile, to ``out_path`` (.npz, atomic).
     Returns its index, spp, samples, seconds (scene load included) and samples per second."""
-    parsed = as_scene(scene)
     start = time.perf_counter()
-    renderer = renderer_for(parsed, bundle_dir)
-    with partial_writer(out_path, renderer.width, renderer.height, parsed.film.bands) as writer:
+    renderer = renderer_for(scene, bundle_dir)
+    with partial_writer(out_path, renderer.width, renderer.height, scene.film.bands) as writer:
         for sums in render_tiles(renderer, [chunk], progress=progress, should_stop=should_stop):
             writer.write_rows(sums)
         seconds = time.perf_counter() - start
@@ -175,7 +170,7 @@ def render_chunk(
 
 
 def merge_chunks(
-    scene: Scene | dict[str, Any],
+    scene: Scene,
     chunk_paths: Sequence[Path],
     out_dir: Path,
     *,
@@ -185,13 +180,12 @@ def merge_chunks(
     variance.exr, preview.png and summary.json."""
     if not chunk_paths:
         raise InputError("chunk_paths: at least one chunk is needed")
-    parsed = as_scene(scene)
     readers = sorted((PartialReader(Path(path)) for path in chunk_paths), key=lambda r: r.chunk_index)
-    width, height = parsed.film.width, parsed.film.height
-    if any((r.width, r.height, r.band_count) != (width, height, parsed.film.bands) for r in readers):
+    width, height = scene.film.width, scene.film.height
+    if any((r.width, r.height, r.band_count) != (width, height, scene.film.bands) for r in readers):
         raise InputError("chunk_paths: a partial's size or bands differ from the scene's film")
     return write_merged(
-        parsed,
+        scene,
         iter_merged_rows(readers, tile_bands(width, height)),
         out_dir,
         chunks=len(readers),
@@ -201,7 +195,7 @@ def merge_chunks(
 
 
 def write_merged(
-    scene: Scene | dict[str, Any],
+    scene: Scene,
     row_bands: Iterable[PixelSums],
     out_dir: Path,
     *,
@@ -211,31 +205,28 @@ def write_merged(
 ) -> dict[str, Any]:
     """Write image.exr, variance.exr, preview.png and summary.json from the merged sums, row band by row
     band (top to bottom). ``render_seconds()``: the render time, read once every band was consumed."""
-    parsed = as_scene(scene)
-    film = parsed.film
+    film = scene.film
     out_dir = Path(out_dir)
     sample_count = 0
-    with image_set_writer(out_dir, film_bands(parsed), film.width, film.height) as writer:
+    with image_set_writer(out_dir, film_bands(scene), film.width, film.height) as writer:
         for sums in row_bands:
             sample_count = sums.sample_count
             writer.write_rows(sums)
     seconds = render_seconds()
     samples = sample_count * film.width * film.height
-    from worker.mitsuba_setup import load_mitsuba
-
     summary = {
-        "scene": parsed.name,
+        "scene": scene.name,
         "width": film.width,
         "height": film.height,
         "spp": sample_count,
         "bands": film.bands,
-        "band_centers_nm": film_bands(parsed).centers_nm.tolist(),
+        "band_centers_nm": film_bands(scene).centers_nm.tolist(),
         "modes": film.modes,
         "max_depth": film.max_depth,
         "integrator": film.integrator,
-        "wavelength_sampling": sampling_mode(parsed),  # auto resolved
+        "wavelength_sampling": sampling_mode(scene),  # auto resolved
         "chunks": chunks,
-        "variant": load_mitsuba().variant(),
+        "variant": configured_mitsuba().variant(),
         "render_seconds": seconds,
         "samples": samples,
         "samples_per_second": samples / seconds if seconds > 0 else None,
@@ -355,17 +346,8 @@ def render_to_dir(
         )
 
 
-def with_overrides(scene: Scene | dict[str, Any], **overrides: Any) -> Scene:
-    """The scene with the film fields in ``overrides`` that are not None replaced (validated again)."""
-    parsed = as_scene(scene)
-    changes = {key: value for key, value in overrides.items() if value is not None}
-    if not changes:
-        return parsed
-    return validate_scene({**parsed.to_json_dict(), "film": {**parsed.film.model_dump(), **changes}})
-
-
 def render_scene(
-    scene: Scene | dict[str, Any],
+    scene: Scene,
     out_dir: Path,
     *,
     spp: int | None = None,
@@ -379,11 +361,12 @@ def render_scene(
     target: NoiseTarget | None = None,
 ) -> dict[str, Any]:
     """Render locally and write the final artifacts to ``out_dir`` (``render_to_dir``). With a noise
-    ``target``, ``spp`` (or film.spp) is the first round's."""
-    parsed = with_overrides(scene, spp=spp, seed=seed, modes=modes, integrator=integrator)
-    plan = plan_chunks(parsed.film.spp, chunks, parsed.film.seed)
+    ``target``, ``spp`` (or film.spp) is the first round's. ``spp``, ``seed``, ``modes`` and
+    ``integrator`` override the film's (``schemas.with_film_overrides``)."""
+    scene = with_film_overrides(scene, spp=spp, seed=seed, modes=modes, integrator=integrator)
+    plan = plan_chunks(scene.film.spp, chunks, scene.film.seed)
     return render_to_dir(
-        parsed,
+        scene,
         Path(out_dir),
         plan,
         progress=progress,

@@ -1,0 +1,165 @@
+"""The job record and its one owner: typed fields round-trip through Redis text, an undeclared field is
+refused, no module but ``hgcore.jobs.lifecycle`` touches a job's keys, and a job lives through the
+lifecycle (create, a chunk, the merge, finalize with manifest and digests; fail; cancel; remove) on a real
+Redis and filesystem store, without workers."""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+import json
+import time
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import redis
+
+from hgcore.artifacts.keys import manifest_key, worker_log_key
+from hgcore.jobs.lifecycle import JobLifecycle
+from hgcore.jobs.record import JobRecord, JobSteps, StepRecord
+from hgcore.jobs.status import JobStatus
+from hgcore.store.filesystem import FilesystemStore
+from tests.support import REPO_ROOT
+
+PRODUCTION_PACKAGES = ("hgcore", "schemas", "service", "worker", "hgrender")
+JOB_KEYS = frozenset(
+    {"job_key", "steps_key", "scene_document_key", "owner_index_key", "JOBS_INDEX", "JOBS_BY_STATE"}
+)
+"""The names of a job's Redis keys (``hgcore.jobs.keys``)."""
+KEY_OWNERS = frozenset({"hgcore/jobs/keys.py", "hgcore/jobs/lifecycle.py"})
+
+
+def a_record(**fields: object) -> JobRecord:
+    values: dict[str, object] = {
+        "id": uuid.uuid4().hex,
+        "owner": "alice",
+        "status": JobStatus.QUEUED,
+        "priority": "normal",
+        "spp": 8,
+        "seed": 3,
+        "chunk_count": 2,
+        "created_at": time.time(),
+    }
+    return JobRecord(**(values | fields))  # type: ignore[arg-type]
+
+
+def test_every_field_round_trips_through_redis_text() -> None:
+    record = a_record(
+        name="nightly",
+        width=16,
+        height=None,
+        target_rel_error=0.1,
+        time_budget_s=None,
+        started_at=1.0 / 3.0,
+        error="chunk 0: boom",
+        noise_target_outcome={"rounds": [{"spp": 4, "seconds": 0.5, "rel_error": 0.2}], "met": False},
+    )
+    text = record.to_hash()
+    assert all(isinstance(value, str) for value in text.values())
+    assert text["chunks"] == "2" and text["height"] == "" and text["status"] == "queued"
+    assert JobRecord.from_hash(text) == record  # floats exactly (repr), enums, JSON, None
+    assert record.noise_target is not None and record.noise_target.rel_error == 0.1
+    steps = StepRecord.encode_step(1, status="running", progress=0.25, pid=42, spp=None)
+    assert steps == {"1.status": "running", "1.progress": "0.25", "1.pid": "42", "1.spp": ""}
+    parsed = JobSteps.from_hash(steps | {"merge.status": "running"}, chunk_count=2)
+    assert parsed.chunks[1] == StepRecord(status="running", progress=0.25, pid=42)
+    assert parsed.chunks[0] == StepRecord() and parsed.merge == StepRecord(status="running")
+
+
+def test_a_field_the_record_does_not_declare_is_refused() -> None:
+    with pytest.raises(KeyError, match="finshed_at"):
+        JobRecord.encode_fields(finshed_at=1.0)
+    with pytest.raises(KeyError, match="attempt"):
+        StepRecord.encode_step(0, attempt=2)
+
+
+def _names_used(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    names = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
+    names |= {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
+    names |= {
+        alias.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) for alias in node.names
+    }
+    return names
+
+
+def test_only_the_lifecycle_touches_a_jobs_keys() -> None:
+    """A job's record, steps, scene and indexes are read and written by ``JobLifecycle`` alone; the API,
+    the tasks, the worker class, the reconciler and regression evaluation go through it."""
+    users = {
+        path.relative_to(REPO_ROOT).as_posix(): sorted(_names_used(path) & JOB_KEYS)
+        for package in PRODUCTION_PACKAGES
+        for path in (REPO_ROOT / package).rglob("*.py")
+    }
+    assert {path: names for path, names in users.items() if names and path not in KEY_OWNERS} == {}
+
+
+@pytest.fixture
+def lifecycle(redis_url: str, tmp_path: Path) -> Iterator[JobLifecycle]:
+    client = redis.Redis.from_url(redis_url)
+    yield JobLifecycle(client, FilesystemStore(tmp_path / "store"))
+    client.close()
+
+
+def _create(lifecycle: JobLifecycle, record: JobRecord) -> None:
+    with lifecycle.client.pipeline() as pipe:
+        pipe.multi()
+        lifecycle.add_to(pipe, record, {"film": {"spp": record.spp}})
+        pipe.execute()
+
+
+def test_a_job_succeeds_through_the_lifecycle(lifecycle: JobLifecycle, tmp_path: Path) -> None:
+    record = a_record()
+    _create(lifecycle, record)
+    assert lifecycle.record(record.id) == record
+    assert lifecycle.start_chunk(record.id, 0, "w1", 100, spp=4) == 1
+    assert lifecycle.start_chunk(record.id, 0, "w2", 101, spp=4) == 2  # a retry: the next attempt
+    assert lifecycle.status(record.id) == JobStatus.RUNNING
+    lifecycle.report_progress(record.id, 0, 0.5)
+    view = lifecycle.view(record.id)
+    assert view is not None and view.progress == pytest.approx(0.25) and view.workers == ["w2"]
+    lifecycle.finish_chunk(record.id, 0, samples=1024, seconds=0.5)
+    lifecycle.finish_chunk(record.id, 1, samples=1024, seconds=0.5)
+    merge_started_s = time.monotonic()
+    lifecycle.start_merge(record.id, "w1", 102)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    (out_dir / "image.exr").write_bytes(b"not really an EXR")
+    lifecycle.finalize(record.id, out_dir, {"spp": 8}, merge_started_s)
+    view = lifecycle.view(record.id)
+    assert view is not None and view.status == JobStatus.SUCCEEDED and view.progress == 1.0
+    assert lifecycle.steps(record.id).completions() == {"0": 1, "1": 1, "merge": 1}
+    manifest = json.loads(lifecycle.store.get_bytes(manifest_key(record.id)))
+    assert manifest["job"]["status"] == "succeeded" and manifest["job"]["timings"]["total_s"] > 0
+    digests = {a["name"]: a["sha256"] for a in manifest["artifacts"]}
+    assert digests["image.exr"] == hashlib.sha256(b"not really an EXR").hexdigest()
+    assert {"worker.log", "scene.json"} <= set(digests)
+    lifecycle.fail(record.id, "too late")  # a final status never changes
+    assert lifecycle.status(record.id) == JobStatus.SUCCEEDED
+    lifecycle.remove(record.id)
+    assert lifecycle.record(record.id) is None
+    assert lifecycle.view(record.id) == view.model_copy(update={"eta_s": None})  # kept by the manifest
+
+
+def test_a_job_fails_or_is_canceled_through_the_lifecycle(lifecycle: JobLifecycle, tmp_path: Path) -> None:
+    failing, canceled = a_record(), a_record()
+    _create(lifecycle, failing)
+    _create(lifecycle, canceled)
+    lifecycle.start_chunk(failing.id, 0, "w1", 100, spp=4)
+    lifecycle.fail(failing.id, "chunk 0: RuntimeError: boom")
+    view = lifecycle.view(failing.id)
+    assert view is not None and (view.status, view.error) == (JobStatus.FAILED, "chunk 0: RuntimeError: boom")
+    log = lifecycle.store.get_bytes(worker_log_key(failing.id)).decode()
+    assert log.endswith("error: chunk 0: RuntimeError: boom\n")
+    lifecycle.start_chunk(canceled.id, 1, "w1", 100, spp=4)
+    assert lifecycle.cancel(canceled.id) and not lifecycle.cancel(canceled.id)
+    lifecycle.close_unfinished_steps(canceled.id)
+    assert [step.status for step in lifecycle.steps(canceled.id).chunks] == ["canceled", "canceled"]
+    # A late round of a canceled job changes nothing: its record is written only while it runs.
+    partial = tmp_path / "round.npz"
+    partial.write_bytes(b"partial")
+    assert not lifecycle.publish_round(canceled.id, partial, {"rounds": []})
+    record = lifecycle.record(canceled.id)
+    assert record is not None and record.noise_target_outcome is None
