@@ -363,7 +363,11 @@ class Renderer:
         film_position = mi.Point2f(
             (pixel_x + sampler.next_1d()) / width, (pixel_y + sampler.next_1d()) / height
         )
-        ray, _ = self.sensor.sample_ray(0.0, sampler.next_1d(), film_position, sampler.next_2d())
+        wavelength_sample = sampler.next_1d()  # Mitsuba's argument; the wavelengths are drawn below
+        aperture_sample = sampler.next_2d()
+        ray, _ = self.sensor.sample_ray(0.0, wavelength_sample, film_position, aperture_sample)
+        if self.compiled.lens is not None:  # a thin lens on the pinhole sensor (``thin_lens``)
+            ray = self.compiled.lens.ray(mi, ray, aperture_sample)
         span = bands.wavelength_max_nm - bands.wavelength_min_nm
         # The hero set and each lane's weight (worker.render.wavelength_sampling): ρ_λ,j = (1/Λ)/p(λ_j).
         hero_set = self.wavelengths.sample(sampler.next_1d())

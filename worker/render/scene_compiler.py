@@ -29,6 +29,7 @@ from schemas.procedural import GENERATORS, generate_mesh
 from worker.render import materials as mat
 from worker.render.emitters import EmitterKind, EmitterRecord, EmitterTable
 from worker.render.spectral import SpectralTable, grid_wavelengths_nm
+from worker.render.thin_lens import ThinLens
 
 EMITTER_SPECTRUM_STEP_NM = 1.0
 
@@ -44,6 +45,7 @@ class CompiledScene:
     emitter_table: EmitterTable
     shape_materials: dict[str, int]  # Mitsuba shape id -> material index
     emitter_records: dict[str, int]  # Mitsuba shape id of an emitter -> emitter record index
+    lens: ThinLens | None = None  # the camera's thin lens (None: a pinhole)
 
 
 def spectrum_on(spectrum: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
@@ -388,8 +390,20 @@ class SceneCompiler:
             references[name] = reference
         black_index = material_table.add(mat.MaterialRecord(mat.MaterialKind.BLACK))
 
+        # A thin lens: hg_path's renderer puts ``thin_lens.ThinLens`` on the pinhole sensor (a frozen pass
+        # cannot record Mitsuba's ``thinlens``); the reference scene uses Mitsuba's own ``thinlens``.
+        lens = None
+        reference_sensor = sensor
+        if camera.aperture_radius_m > 0.0:
+            lens = self._thin_lens(camera, camera_to_world)
+            reference_sensor = {
+                **sensor,
+                "type": "thinlens",
+                "aperture_radius": lens.aperture_radius_m,
+                "focus_distance": lens.focus_distance_m,
+            }
         hg_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
-        reference_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
+        reference_dict: dict[str, Any] = {"type": "scene", "sensor": reference_sensor}
         shape_materials: dict[str, int] = {}
         for index, shape in enumerate(scene.shapes):
             key = f"shape_{index}"
@@ -429,6 +443,26 @@ class SceneCompiler:
             emitter_table,
             shape_materials,
             emitter_records,
+            lens,
+        )
+
+    def _thin_lens(self, camera: model.PerspectiveCamera, camera_to_world: Any) -> ThinLens:
+        """The camera's thin lens in world space (``thin_lens``: Mitsuba's camera frame, +x left)."""
+        mi = self.mi
+
+        def axis(local: tuple[float, float, float]) -> tuple[float, float, float]:
+            vector = np.asarray(camera_to_world @ mi.ScalarVector3f(*local), dtype=float)
+            return tuple((vector / np.linalg.norm(vector)).tolist())
+
+        return ThinLens(
+            aperture_radius_m=camera.aperture_radius_m,
+            focus_distance_m=camera.focus_distance(),
+            near_clip_m=camera.near_clip_m,
+            far_clip_m=camera.far_clip_m,
+            centre=tuple(np.asarray(camera_to_world @ mi.ScalarPoint3f(0.0, 0.0, 0.0), dtype=float).tolist()),
+            axis_x=axis((1.0, 0.0, 0.0)),
+            axis_y=axis((0.0, 1.0, 0.0)),
+            axis_z=axis((0.0, 0.0, 1.0)),
         )
 
     def _inline_mesh_with_bsdf(self, shape: Any, bsdf: dict, key: str) -> Any:
