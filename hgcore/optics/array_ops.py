@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.special
 
 from hgcore.errors import InputError
 
@@ -33,21 +34,28 @@ class ArrayOps:
     maximum: Any
     where: Any
     floor: Any
+    erf: Any = None  # the error function (SciPy's for NumPy)
 
     def clip(self, value: Any, low: float, high: float) -> Any:
         return self.minimum(self.maximum(value, low), high)
 
     @classmethod
-    def of(cls, name: str, library: Any, atan2: Any, where: Any) -> ArrayOps:
+    def of(cls, name: str, library: Any, atan2: Any, where: Any, erf: Any = None) -> ArrayOps:
         """The namespace of an array ``library`` whose element-wise functions carry the usual names;
-        ``atan2`` and ``where`` are the two that libraries name differently."""
+        ``atan2`` and ``where`` are the two that libraries name differently, ``erf`` one NumPy lacks."""
         functions = {f: getattr(library, f) for f in ("exp", "log", "sqrt", "sin", "cos", "abs", "floor")}
         return cls(
-            name=name, atan2=atan2, where=where, minimum=library.minimum, maximum=library.maximum, **functions
+            name=name,
+            atan2=atan2,
+            where=where,
+            minimum=library.minimum,
+            maximum=library.maximum,
+            erf=erf if erf is not None else getattr(library, "erf", None),
+            **functions,
         )
 
 
-NUMPY = ArrayOps.of("numpy", np, atan2=np.arctan2, where=np.where)
+NUMPY = ArrayOps.of("numpy", np, atan2=np.arctan2, where=np.where, erf=scipy.special.erf)
 
 
 def hermite_functions(u: Any, max_order: int, ops: ArrayOps = NUMPY) -> list[Any]:

@@ -57,9 +57,9 @@ from worker.render.bsdfs import (
     MaterialSample,
     VertexSpectra,
     VisibilityModel,
-    film_reflectance,
 )
 from worker.render.bsdfs.lobes import mean_over_wavelengths
+from worker.render.bsdfs.thin_film import detected_light, film_at_directions, visible_reflectance
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import (
     CylinderModes,
@@ -199,8 +199,14 @@ class PendingFilm:
     # the film shear s (m) between successive beams, carried through the specular chain like the frame
     separation: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
-    position: mi.Point3f = field(default_factory=lambda: mi.Point3f(0.0))
-    normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, 1.0))
+    # The film normal's components (n·x, n·y, n·k) in the record's frame (x, y) and sampled incident
+    # direction k: the chain maps all three alike, so they hold at the source's end too.
+    normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, -1.0))
+    # The film's acceptance (``bsdfs.thin_film.detected_light``): the centre of its lobe relative to k (rad,
+    # in the record's frame) and its per-axis variance per wavelength (rad²; 0: the specular part or
+    # transmission, which pass one direction).
+    acceptance_mean: mi.Point2f = field(default_factory=lambda: mi.Point2f(0.0))
+    lobe_variance: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(0.0))
     # [R_incoherent, X_1 …] at the sampled direction (linear in the visibilities V_d); none without films
     terms: list[mi.Spectrum] = field(default_factory=list)
 
@@ -453,7 +459,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         vertex: Vertex,
         em_record: mi.UInt32,
         segment: mi.Float,
-        ray_origin: mi.Point3f,
+        ray: mi.Ray3f,
         wavelengths: mi.Spectrum,
         path: PathState,
         record: PendingRecord,
@@ -481,7 +487,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             source_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
         # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
         # becomes the distance from the segment's origin to that centre.
-        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, em_record, ray_origin)
+        centre_distance, from_centre = emitter_direction(mi, self.context.emitter_flat, em_record, ray.o)
         record.chain_distance = dr.select(
             vertex.hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
         )
@@ -496,12 +502,19 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         if self.kernels.has(mat.INTERFERENCE_KINDS):
             # A symbolic branch: most resolved records are not a film's (the diffuse floor's), and packets
             # without a film lane skip the visibilities of every beam.
+            def film_factor(beta: mi.Spectrum) -> mi.Spectrum:
+                # The emitter's centre seen along the chain: its offset Δ ⟂ the last segment, over the
+                # unfolded distance r, is the centre's direction relative to the path at the film.
+                to_centre = -centre_distance * from_centre
+                across = to_centre - dr.dot(to_centre, ray.d) * ray.d
+                scale = dr.select(
+                    vertex.hit_emitter & (not self.plane_waves), -dr.rcp(record.chain_distance), 0.0
+                )
+                source_mean = (scale * dr.dot(across, record.frame_x), scale * dr.dot(across, record.frame_y))
+                return beta * self._film_factor(wavelengths, record, film, resolved, source_mean)
+
             path.beta = dr.if_stmt(
-                (path.beta,),
-                resolve & film.pending,
-                lambda beta: beta * self._film_factor(vertex, em_record, wavelengths, record, film, resolved),
-                lambda beta: beta,
-                label="film_factor",
+                (path.beta,), resolve & film.pending, film_factor, lambda beta: beta, label="film_factor"
             )
         record_first = resolve & record.first
         first_vertex.indirect = dr.select(
@@ -518,37 +531,62 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
     def _film_factor(
         self,
-        vertex: Vertex,
-        em_record: mi.UInt32,
         wavelengths: mi.Spectrum,
         record: PendingRecord,
         film: PendingFilm,
         resolved: IncidentCoherence,
+        source_mean: tuple[mi.Float, mi.Float],
     ) -> mi.Spectrum:
-        """R(V)/R_incoherent of a pending film whose incident light is now ``resolved``: the path was
-        sampled with the incoherent part at its own direction, so its throughput takes the relative
-        interference modulation of the phase direction.
+        """R(V)/R_incoherent of a pending film whose incident light is now ``resolved`` (Σ⊥ in the record's
+        frame, r) from a source whose centre lies at ``source_mean`` (rad) from the path's direction: the
+        path was sampled with the incoherent part at its own direction, so its throughput takes the
+        relative interference modulation of the light the film passes towards the pixel
+        (``bsdfs.thin_film.detected_light``; docs/physics_interactions.md §3, "What a pixel sees").
 
-        An emitter reached straight from the film has its interference phase taken towards the emitter's
-        centre (BRIEF), as in next-event estimation (the terms there: a symbolic branch, rarely taken);
-        through mirrors, along the path."""
-        phase_terms = list(film.terms)
-        if not self.plane_waves:
-            centre_phase = vertex.hit_emitter & ~record.chain_specular & ~film.transmitted
+        The film's specular part, seen from the camera through mirrors and glass only, passes one direction
+        of the source: the path's own (V = 1, the sampled terms). Its lobe passes its width around the
+        mirror direction, and a film seen through a non-specular vertex the whole source
+        (``~record.first``): there the phase is that of the detected mean direction, whose terms and shear
+        are evaluated here (a symbolic branch; transmitted light keeps the path's phase)."""
+        inverse_r2 = dr.rcp(dr.square(dr.maximum(resolved.distance_m, 1e-9)))
+        source_cov = (
+            resolved.sigma_xx * inverse_r2,
+            resolved.sigma_xy * inverse_r2,
+            resolved.sigma_yy * inverse_r2,
+        )
+        light = detected_light(
+            tuple(film.normal),
+            source_mean,
+            source_cov,
+            tuple(film.acceptance_mean),
+            film.lobe_variance,
+            ~record.first,
+            resolved.rect_source,
+            wavelengths,
+        )
+        moved = mi.Bool(False)
+        for mean_x, mean_y in light.means:
+            moved |= dr.square(mean_x) + dr.square(mean_y) > 1e-12
+        moved &= ~film.transmitted
+        path_shear = (dr.dot(film.separation, record.frame_x), dr.dot(film.separation, record.frame_y))
+        beams = len(film.terms)
+        params = self.kernels.params
 
-            def centre_terms(*_: mi.Spectrum) -> list[mi.Spectrum]:
-                table = self.context.emitter_flat
-                _, emitter_to_film = emitter_direction(mi, table, em_record, film.position)
-                cos_centre = -dr.dot(emitter_to_film, film.normal)
-                return list(self.kernels.film_terms(film.material, cos_centre, wavelengths))
+        def at_mean(*_: mi.Float) -> tuple[mi.Float, ...]:
+            spectra = VertexSpectra(params, film.material, wavelengths, self.kernels.spectrum_offsets)
+            terms, shears = film_at_directions(spectra, tuple(film.normal), light.means)
+            return (*terms, *(component for shear in shears for component in shear))
 
-            def kept(*terms: mi.Spectrum) -> list[mi.Spectrum]:
-                return list(terms)
+        def along_path(*_: mi.Float) -> tuple[mi.Float, ...]:
+            return (*film.terms, *(path_shear * len(wavelengths)))
 
-            phase_terms = dr.if_stmt(tuple(phase_terms), centre_phase, centre_terms, kept, label="centre")
-        visibility = self.kernels.visibility
-        film_factor = film_reflectance(phase_terms, visibility, resolved, film.separation, wavelengths)
-        return film_factor / dr.maximum(phase_terms[0], 1e-12)
+        state = dr.if_stmt(tuple(along_path()), moved, at_mean, along_path, label="film_phase")
+        terms = list(state[:beams])
+        shears = [(state[beams + 2 * j], state[beams + 2 * j + 1]) for j in range(len(wavelengths))]
+        reflectance = visible_reflectance(
+            terms, shears, light.covariances, resolved, self.kernels.visibility, wavelengths
+        )
+        return reflectance / dr.maximum(terms[0], 1e-12)
 
     @dr.syntax
     def _start_or_carry(
@@ -599,8 +637,27 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             shear = film_shear(vertex.frame.n, -wo_world, thickness, film_ior, incident_ior, OPS)
             film.separation = dr.select(is_film, mi.Vector3f(*shear), film.separation)
             film.material = dr.select(is_film, vertex.material, film.material)
-            film.position = dr.select(is_film, vertex.si.p, film.position)
-            film.normal = dr.select(is_film, vertex.frame.n, film.normal)
+            normal = vertex.frame.n
+            film.normal = dr.select(
+                is_film,
+                mi.Vector3f(
+                    dr.dot(normal, incoming_fx), dr.dot(normal, incoming_fy), -dr.dot(normal, wo_world)
+                ),
+                film.normal,
+            )
+            # The acceptance (``bsdfs.thin_film.detected_light``): the lobe's centre is the mirror image of
+            # the direction the path arrived from; the specular part and transmission pass one direction.
+            towards_camera = vertex.si.to_world(vertex.si.wi)
+            mirror = 2.0 * dr.dot(towards_camera, normal) * normal - towards_camera
+            lobe = ~sampled.delta & ~sampled.film.transmitted
+            centre = dr.select(lobe, wo_world - mirror, 0.0)  # k_a − k, k = −wo
+            film.acceptance_mean = dr.select(
+                is_film,
+                mi.Point2f(dr.dot(centre, incoming_fx), dr.dot(centre, incoming_fy)),
+                film.acceptance_mean,
+            )
+            variance = self.kernels.lobe_variance(vertex.material, vertex.spectra.wavelengths)
+            film.lobe_variance = dr.select(is_film, dr.select(lobe, variance, 0.0), film.lobe_variance)
             film.transmitted = dr.select(is_film, sampled.film.transmitted, film.transmitted)
             film.terms = dr.select(is_film, list(sampled.film.terms), list(film.terms))
         # Through a perfect mirror / refraction the carried vectors follow the beam.
@@ -788,7 +845,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             # Symbolic branch: skipped by packets where no lane resolves (most bounces of most scenes).
             if resolve:
                 self._resolve(
-                    resolve, vertex, em_record, segment, ray.o, wavelengths, path, record, film, first_vertex
+                    resolve, vertex, em_record, segment, ray, wavelengths, path, record, film, first_vertex
                 )
             record.pending &= ~resolve
             film.pending &= ~resolve
@@ -830,6 +887,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             nee_coherence, direct_sample = self._emitter_light(
                 needs_nee_coherence, em_record_nee, si.p, nee_geometry
             )
+            # Beyond the first non-specular vertex every direction of the source reaches the pixel.
+            nee_coherence.acceptance_unbounded = mi.Bool(first_vertex.seen)
             wo_em = frame.to_local(ds_em.d)
             # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
             # and a thin film's interference phase; the sampled point serves the radiometric terms only.

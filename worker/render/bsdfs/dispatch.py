@@ -133,6 +133,15 @@ class MaterialKernels:
         """A thin film's terms [R_incoherent, X_1 …] at incidence cos_i (``thin_film.film_terms``)."""
         return film_terms(VertexSpectra(self.params, material, wavelengths), cos_i)
 
+    def lobe_variance(self, material: mi.UInt32, wavelengths: mi.Spectrum) -> mi.Spectrum:
+        """The per-axis variance (rad²) of the directions a thin film's rough lobe accepts
+        (``ThinFilm.lobe_variance``) in the lanes of each film, 0 elsewhere."""
+        result = mi.Spectrum(0.0)
+        for branch in self.branches:
+            if isinstance(branch, ThinFilm):
+                result = dr.select(material == branch.index, branch.lobe_variance(wavelengths), result)
+        return result
+
     # ---------------------------------------------------------------- evaluation and sampling
     def eval_pdf(
         self,
