@@ -18,16 +18,24 @@ leaves a *pending* record, resolved at the next non-specular vertex or emitter h
   vertex (Θ is kept and r grows through Dirac interactions — §5 "Perfectly specular reflectors");
 * ``frame_x``/``frame_y``: the transverse frame of the pending vertex's incident beam, reflected through
   the chain so that the source's Σ⊥ lands in that vertex's frame;
-* ``film_separation``: for a thin-film vertex, the film shear s (m) between successive beams
-  (``hgcore.optics.thin_film.film_shear``, 2τ tan θ_t in the plane of incidence),
-  also carried through the chain, and its partially-coherent reflectance terms (linear in the visibilities).
+* ``PendingFilm``: for a thin-film vertex, the film shear s (m) between successive beams
+  (``hgcore.optics.thin_film.film_shear``, 2τ tan θ_t in the plane of incidence), also carried through the
+  chain, its partially-coherent reflectance terms (linear in the visibilities), and what it passes on
+  towards the pixel (its acceptance: one direction for its specular part, its lobe's width otherwise).
 
 At resolution the source is the emitter (whole emitter, BRIEF) or a non-specular surface: a *secondary*
 incoherent source whose extent is the part of that surface that is lit and seen from the receiver (van
 Cittert–Zernike, docs/physics.md §7). Its points are mutually incoherent, so each path, which reaches one
 point of it, carries a point source (Σ⊥ = 0, phase along the sampled direction); averaging the paths
-gives the partially coherent response of the whole lit patch. A material's explicit
+gives the partially coherent response of the part of the lit patch the pixel sees. A material's explicit
 ``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane.
+
+What a pixel sees (docs/physics_interactions.md §3): a film evaluates each plane wave of an incoherent
+source coherently, so a pixel sees its fringes averaged over the source directions the film (and the
+camera's lens, whose cone the paths sample) pass towards it. ``_film_factor`` and the film's next-event
+evaluation combine the source with the film's acceptance (``bsdfs.thin_film.detected_light``) and take the
+film's phase at the mean direction of what reaches the pixel; beyond a non-specular vertex the whole source
+does (the paper's Eq. 18).
 
 Diagnostics (BRIEF): M = (k/r)²Σ⊥ at λ = 550 nm of the light incident at the first non-specular vertex,
 luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, light
@@ -187,7 +195,6 @@ class PendingRecord:
     # transverse frame of that vertex's incident beam, reflected through the specular chain
     frame_x: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     frame_y: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
-    chain_specular: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # through a mirror/refraction
 
 
 @loop_struct
@@ -662,7 +669,6 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             film.terms = dr.select(is_film, list(sampled.film.terms), list(film.terms))
         # Through a perfect mirror / refraction the carried vectors follow the beam.
         through_specular = continue_path & (vertex.specular | film_passthrough) & record.pending
-        record.chain_specular = dr.select(new_record, False, record.chain_specular | through_specular)
         record.frame_x = dr.select(
             through_specular, _reflect_vector(record.frame_x, vertex.frame.n), record.frame_x
         )
