@@ -42,6 +42,9 @@ from typing import Any
 from hgcore.optics.array_ops import ArrayOps
 from hgcore.optics.rough_surface import RoughSurface
 
+#: The longest wavelength a scene renders (the schema's limit), at which a lobe is widest.
+NARROW_LOBE_WAVELENGTH_M = 2.5e-6
+
 
 def lobe_acceptance_variance(
     surface: RoughSurface, exterior_ior: float, wavelength_m: Any, ops: ArrayOps
@@ -63,6 +66,8 @@ def lobe_acceptance_variance(
     if surface.psd_model == "gaussian":
         std = wavelength_m / (math.sqrt(2.0) * math.pi * surface.correlation_length_m * n)
         variance = std * std
+        if NARROW_LOBE_WAVELENGTH_M / (math.sqrt(2.0) * math.pi * surface.correlation_length_m * n) <= 0.12:
+            return variance  # e^{−u} < e^{−34} at every wavelength: the truncation changes nothing
         u = 0.5 / ops.maximum(variance, 1e-30)
         tail = ops.exp(-ops.minimum(u, 80.0))
         return ops.minimum(variance * (1.0 - tail * (1.0 + u)) / ops.maximum(1.0 - tail, 1e-30), 0.25)
@@ -97,9 +102,22 @@ def lobe_covariance_components(
 #: silhouette is a strip).
 ELLIPSE_OFFSET_SCALE = math.sqrt(3.0) / 2.0
 PARALLELOGRAM_OFFSET_SCALE = 1.0
-#: Below this mass of the acceptance inside the source's box the truncated moments lose their float32
-#: precision (the acceptance lies far outside the source: such light is faint); the Gaussian product serves.
-MIN_TRUNCATED_MASS = 1e-3
+
+
+#: Abramowitz & Stegun 26.2.17: P(Z > x) = φ(x)·Σ_k b_k t^k, t = 1/(1 + p x), for x ≥ 0 (|error| < 7.5e-8).
+NORMAL_TAIL_P = 0.2316419
+NORMAL_TAIL_B = (0.319381530, -0.356563782, 1.781477937, -1.821255978, 1.330274429)
+
+
+def _normal_cdf(x: Any, density: Any, ops: ArrayOps) -> Any:
+    """Φ(x) from the standard normal density φ(x) at x (A&S 26.2.17: the tail shares φ's exponential, and
+    P(Z > |x|) keeps its relative precision far in the tails, where 1 − erf would round to 0)."""
+    t = 1.0 / (1.0 + NORMAL_TAIL_P * ops.abs(x))
+    polynomial = NORMAL_TAIL_B[-1]
+    for coefficient in NORMAL_TAIL_B[-2::-1]:
+        polynomial = polynomial * t + coefficient
+    tail = density * polynomial * t
+    return ops.where(x >= 0.0, 1.0 - tail, tail)
 
 
 def _truncated_normal_moments(half_width: Any, mean: Any, std: Any, ops: ArrayOps) -> tuple[Any, Any, Any]:
@@ -109,16 +127,41 @@ def _truncated_normal_moments(half_width: Any, mean: Any, std: Any, ops: ArrayOp
     safe_std = ops.maximum(std, 1e-30)
     a = (-half_width - mean) / safe_std
     b = (half_width - mean) / safe_std
-    inverse_sqrt2 = 1.0 / math.sqrt(2.0)
-    mass = 0.5 * (ops.erf(b * inverse_sqrt2) - ops.erf(a * inverse_sqrt2))
     density_a = ops.exp(-0.5 * ops.minimum(a * a, 1e4)) / math.sqrt(2.0 * math.pi)
     density_b = ops.exp(-0.5 * ops.minimum(b * b, 1e4)) / math.sqrt(2.0 * math.pi)
-    safe_mass = ops.maximum(mass, 1e-30)
+    mass = _normal_cdf(b, density_b, ops) - _normal_cdf(a, density_a, ops)
+    # Far outside the interval (mass → 0, lost to rounding) the moments are meaningless but must stay finite:
+    # the caller clamps them into the interval. With this floor |shift| ≤ 4e11 and the squares stay finite.
+    safe_mass = ops.maximum(mass, 1e-12)
     shift = (density_a - density_b) / safe_mass
     # a·φ(a) with a clipped: φ vanishes long before a overflows
     spread = (ops.clip(a, -1e2, 1e2) * density_a - ops.clip(b, -1e2, 1e2) * density_b) / safe_mass
     variance = safe_std * safe_std * ops.maximum(1.0 + spread - shift * shift, 0.0)
     return mean + safe_std * shift, variance, mass
+
+
+def flat_top_axes(
+    source_cov: tuple[Any, Any, Any], acceptance_cov: tuple[Any, Any, Any], ops: ArrayOps
+) -> tuple[tuple[Any, Any], tuple[Any, Any]]:
+    """The axes of ``flat_top_product_components``: the principal axes of C_s·tr C_a + C_a·tr C_s (the
+    acceptance's for an isotropic source, the source's for an isotropic acceptance). A scale of C_a leaves
+    them unchanged, so a lobe's axes serve every wavelength."""
+    sxx, sxy, syy = source_cov
+    axx, axy, ayy = acceptance_cov
+    trace_a, trace_s = axx + ayy, sxx + syy
+    bxx, bxy, byy = (
+        sxx * trace_a + axx * trace_s,
+        sxy * trace_a + axy * trace_s,
+        syy * trace_a + ayy * trace_s,
+    )
+    root = ops.sqrt((bxx - byy) * (bxx - byy) + 4.0 * bxy * bxy)
+    isotropic = root <= 1e-6 * ops.maximum(bxx + byy, 1e-30)
+    cos_2phi = ops.where(isotropic, 1.0, (bxx - byy) / ops.maximum(root, 1e-30))
+    sin_2phi = ops.where(isotropic, 0.0, 2.0 * bxy / ops.maximum(root, 1e-30))
+    cos_phi = ops.sqrt(ops.maximum(0.5 * (1.0 + cos_2phi), 0.0))
+    sin_phi = ops.sqrt(ops.maximum(0.5 * (1.0 - cos_2phi), 0.0))
+    sin_phi = ops.where(sin_2phi < 0.0, -sin_phi, sin_phi)
+    return (cos_phi, sin_phi), (-sin_phi, cos_phi)
 
 
 def flat_top_product_components(
@@ -129,52 +172,47 @@ def flat_top_product_components(
     unbounded: Any,
     offset_scale: Any,
     ops: ArrayOps,
+    axes: tuple[tuple[Any, Any], tuple[Any, Any]] | None = None,
+    truncate_second_axis: bool = True,
 ) -> tuple[tuple[Any, Any], tuple[Any, Any, Any]]:
     """(m, C) of a *uniform* source (covariance C_s, rad²) times a Gaussian acceptance: the mean and
-    covariance of the acceptance restricted to the source (module docstring, "Flat-top product").
+    covariance of the acceptance restricted to the source (module docstring, "The product").
 
-    Per principal axis e_i of C_s·tr C_a + C_a·tr C_s (the acceptance's axes for an isotropic source, the
-    source's for an isotropic acceptance) the source is the box of equal variance, ±√3σ_i, and the
-    acceptance the normal of variance e_iᵀC_a e_i; their product's moments are the truncated normal's
-    (``_truncated_normal_moments``). ``offset_scale``: ``ELLIPSE_OFFSET_SCALE`` for a uniform ellipse —
-    its edge lies at 2σ_i, the box's at √3σ_i, so offsets from the centre are scaled by √3/2 before and
-    back after (an acceptance near the ellipse's edge is truncated there) — or
-    ``PARALLELOGRAM_OFFSET_SCALE``. Limits: C_a → 0 gives (m_a, 0) inside the source; C_a → ∞ (or
-    ``unbounded``) the source's own (m_s, C_s); C_s = 0 (a point source) gives (m_s, 0). Where the
-    acceptance's mass inside the box is below ``MIN_TRUNCATED_MASS`` the Gaussian product serves."""
+    Per axis e_i (``flat_top_axes``, or ``axes`` computed once for acceptances of one shape) the source is
+    the box of equal variance, ±√3σ_i, and the acceptance the normal of variance e_iᵀC_a e_i; their
+    product's moments are the truncated normal's (``_truncated_normal_moments``). ``offset_scale``:
+    ``ELLIPSE_OFFSET_SCALE`` for a uniform ellipse — its edge lies at 2σ_i, the box's at √3σ_i, so offsets
+    from the centre are scaled by √3/2 before and back after (an acceptance near the ellipse's edge is
+    truncated there) — or ``PARALLELOGRAM_OFFSET_SCALE``. Limits: C_a → 0 gives (m_a, 0) inside the
+    source (clamped into it); C_a → ∞ (or ``unbounded``) the source's own (m_s, C_s); C_s = 0 (a point
+    source) gives (m_s, 0). An acceptance far outside the source (a faint lane) has its truncated moments
+    clamped into the source's box: its mean to the edge, its variance to the box's.
+
+    ``truncate_second_axis`` False: along the second axis the 1-D Gaussian product instead (no error
+    functions), for a caller that needs the first axis's moments only to first order in the second's — a
+    film's 0th-mode visibility, whose argument lies along its plane of incidence (``axes``' first)."""
     sxx, sxy, syy = source_cov
     axx, axy, ayy = acceptance_cov
-    trace_a, trace_s = axx + ayy, sxx + syy
-    bxx, bxy, byy = (
-        sxx * trace_a + axx * trace_s,
-        sxy * trace_a + axy * trace_s,
-        syy * trace_a + ayy * trace_s,
-    )
-    root = ops.sqrt((bxx - byy) * (bxx - byy) + 4.0 * bxy * bxy)
-    isotropic = root <= 1e-6 * ops.maximum(bxx + byy, 1e-38)
-    cos_2phi = ops.where(isotropic, 1.0, (bxx - byy) / ops.maximum(root, 1e-38))
-    sin_2phi = ops.where(isotropic, 0.0, 2.0 * bxy / ops.maximum(root, 1e-38))
-    cos_phi = ops.sqrt(ops.maximum(0.5 * (1.0 + cos_2phi), 0.0))
-    sin_phi = ops.sqrt(ops.maximum(0.5 * (1.0 - cos_2phi), 0.0))
-    sin_phi = ops.where(sin_2phi < 0.0, -sin_phi, sin_phi)
-    axes = ((cos_phi, sin_phi), (-sin_phi, cos_phi))
+    axes = flat_top_axes(source_cov, acceptance_cov, ops) if axes is None else axes
     offset = (acceptance_mean[0] - source_mean[0], acceptance_mean[1] - source_mean[1])
-    means, variances, inside = [], [], True
-    for ex, ey in axes:
-        source_var = ex * ex * sxx + 2.0 * ex * ey * sxy + ey * ey * syy
-        acceptance_var = ex * ex * axx + 2.0 * ex * ey * axy + ey * ey * ayy
-        half_width = math.sqrt(3.0) * ops.sqrt(ops.maximum(source_var, 0.0))
+    means, variances = [], []
+    for index, (ex, ey) in enumerate(axes):
+        source_var = ops.maximum(ex * ex * sxx + 2.0 * ex * ey * sxy + ey * ey * syy, 0.0)
+        acceptance_var = ops.maximum(ex * ex * axx + 2.0 * ex * ey * axy + ey * ey * ayy, 0.0)
+        if index == 1 and not truncate_second_axis:
+            gain = acceptance_var / ops.maximum(acceptance_var + source_var, 1e-30)
+            means.append((1.0 - gain) * (ex * offset[0] + ey * offset[1]))
+            variances.append(gain * source_var)
+            continue
+        half_width = math.sqrt(3.0) * ops.sqrt(source_var)
         along = (ex * offset[0] + ey * offset[1]) * offset_scale
-        mean, variance, mass = _truncated_normal_moments(
-            half_width, along, ops.sqrt(ops.maximum(acceptance_var, 0.0)), ops
-        )
-        # A point-like acceptance (the truncation's width 0) sits where it is, clamped into the source.
-        point = acceptance_var <= 1e-12 * ops.maximum(source_var, 1e-38)
-        mean = ops.where(point, ops.minimum(ops.maximum(along, -half_width), half_width), mean)
-        variance = ops.where(point, 0.0, variance)
+        mean, variance, _ = _truncated_normal_moments(half_width, along, ops.sqrt(acceptance_var), ops)
+        # A point-like acceptance (the truncation's width 0) sits where it is.
+        point = acceptance_var <= 1e-12 * ops.maximum(source_var, 1e-30)
+        mean = ops.minimum(ops.maximum(ops.where(point, along, mean), -half_width), half_width)
+        variance = ops.where(point, 0.0, ops.minimum(variance, source_var))
         means.append(mean / offset_scale)
         variances.append(variance)
-        inside = inside & ((mass >= MIN_TRUNCATED_MASS) | point)
     (e1x, e1y), (e2x, e2y) = axes
     mean = (
         source_mean[0] + means[0] * e1x + means[1] * e2x,
@@ -185,14 +223,11 @@ def flat_top_product_components(
         variances[0] * e1x * e1y + variances[1] * e2x * e2y,
         variances[0] * e1y * e1y + variances[1] * e2y * e2y,
     )
-    gaussian_mean, gaussian_cov = product_components(
-        source_mean, source_cov, acceptance_mean, acceptance_cov, unbounded, ops
-    )
     if unbounded is True:
-        return gaussian_mean, gaussian_cov
-    use_box = inside if unbounded is False else inside & ~unbounded
-    mean = tuple(ops.where(use_box, m, g) for m, g in zip(mean, gaussian_mean, strict=True))
-    cov = tuple(ops.where(use_box, c, g) for c, g in zip(cov, gaussian_cov, strict=True))
+        return source_mean, source_cov
+    if unbounded is not False:
+        mean = tuple(ops.where(unbounded, s, m) for s, m in zip(source_mean, mean, strict=True))
+        cov = tuple(ops.where(unbounded, s, c) for s, c in zip(source_cov, cov, strict=True))
     return mean, cov
 
 
@@ -215,7 +250,7 @@ def product_components(
     sxx, sxy, syy = source_cov
     txx, txy, tyy = axx + sxx, axy + sxy, ayy + syy
     det = txx * tyy - txy * txy
-    inverse_det = ops.where(det > 0.0, 1.0 / ops.maximum(det, 1e-38), 0.0)
+    inverse_det = ops.where(det > 0.0, 1.0 / ops.maximum(det, 1e-30), 0.0)
     # K = A T⁻¹, T⁻¹ = [[tyy, −txy], [−txy, txx]] / det
     k11 = (axx * tyy - axy * txy) * inverse_det
     k12 = (axy * txx - axx * txy) * inverse_det

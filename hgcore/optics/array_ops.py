@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.special
 
 from hgcore.errors import InputError
 
@@ -34,28 +33,30 @@ class ArrayOps:
     maximum: Any
     where: Any
     floor: Any
-    erf: Any = None  # the error function (SciPy's for NumPy)
+    #: 1/√x where the library has a fast form (Dr.Jit's, 2.3× sqrt and a division on AVX2, ≤ 4e-6
+    #: relative); None: 1/sqrt(x)
+    reciprocal_sqrt: Any = None
 
     def clip(self, value: Any, low: float, high: float) -> Any:
         return self.minimum(self.maximum(value, low), high)
 
+    def rsqrt(self, value: Any) -> Any:
+        """1/√value."""
+        if self.reciprocal_sqrt is not None:
+            return self.reciprocal_sqrt(value)
+        return 1.0 / self.sqrt(value)
+
     @classmethod
-    def of(cls, name: str, library: Any, atan2: Any, where: Any, erf: Any = None) -> ArrayOps:
+    def of(cls, name: str, library: Any, atan2: Any, where: Any) -> ArrayOps:
         """The namespace of an array ``library`` whose element-wise functions carry the usual names;
-        ``atan2`` and ``where`` are the two that libraries name differently, ``erf`` one NumPy lacks."""
+        ``atan2`` and ``where`` are the two that libraries name differently."""
         functions = {f: getattr(library, f) for f in ("exp", "log", "sqrt", "sin", "cos", "abs", "floor")}
         return cls(
-            name=name,
-            atan2=atan2,
-            where=where,
-            minimum=library.minimum,
-            maximum=library.maximum,
-            erf=erf if erf is not None else getattr(library, "erf", None),
-            **functions,
+            name=name, atan2=atan2, where=where, minimum=library.minimum, maximum=library.maximum, **functions
         )
 
 
-NUMPY = ArrayOps.of("numpy", np, atan2=np.arctan2, where=np.where, erf=scipy.special.erf)
+NUMPY = ArrayOps.of("numpy", np, atan2=np.arctan2, where=np.where)
 
 
 def hermite_functions(u: Any, max_order: int, ops: ArrayOps = NUMPY) -> list[Any]:

@@ -204,7 +204,15 @@ def kernel_reflectance(wavelengths_nm: np.ndarray) -> np.ndarray:
     )
     zero = mi.Float(np.zeros(lanes, dtype=np.float32))
     light = detected_light(
-        normal, (zero, zero), source, (zero, zero), mi.Spectrum(0.0), True, coherence.rect_source, wavelengths
+        normal,
+        (zero, zero),
+        source,
+        (zero, zero),
+        mi.Spectrum(0.0),
+        True,
+        coherence.rect_source,
+        kernels.visibility,
+        wavelengths,
     )
     (film,) = renderer.compiled.material_table.indices_of(MaterialKind.THIN_FILM)
     spectra = kernels.vertex_spectra(mi.UInt32(np.full(lanes, film, dtype=np.uint32)), wavelengths)

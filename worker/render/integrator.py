@@ -67,7 +67,12 @@ from worker.render.bsdfs import (
     VisibilityModel,
 )
 from worker.render.bsdfs.lobes import mean_over_wavelengths
-from worker.render.bsdfs.thin_film import detected_light, film_at_directions, visible_reflectance
+from worker.render.bsdfs.thin_film import (
+    DetectedLight,
+    detected_light,
+    film_at_directions,
+    visible_reflectance,
+)
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import (
     CylinderModes,
@@ -561,20 +566,36 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             resolved.sigma_xy * inverse_r2,
             resolved.sigma_yy * inverse_r2,
         )
-        light = detected_light(
-            tuple(film.normal),
-            source_mean,
-            source_cov,
-            tuple(film.acceptance_mean),
-            film.lobe_variance,
-            ~record.first,
-            resolved.rect_source,
-            wavelengths,
+        wavelength_count = len(wavelengths)
+
+        def combined(*_: mi.Float) -> tuple[mi.Float, ...]:
+            light = detected_light(
+                tuple(film.normal),
+                source_mean,
+                source_cov,
+                tuple(film.acceptance_mean),
+                film.lobe_variance,
+                ~record.first,
+                resolved.rect_source,
+                self.kernels.visibility,
+                wavelengths,
+            )
+            return (*light.means[0], *(c for covariance in light.covariances for c in covariance))
+
+        def point(*_: mi.Float) -> tuple[mi.Float, ...]:
+            return (*source_mean, *([mi.Float(0.0)] * (3 * wavelength_count)))
+
+        # A point of a secondary source (Σ⊥ = 0) is what reaches the pixel whatever the film passes (C = 0,
+        # the path's own point): a symbolic branch spares those lanes (most film records' in most scenes)
+        # the combination.
+        extended = (resolved.sigma_xx + resolved.sigma_yy) > 0.0
+        state = dr.if_stmt(tuple(point()), extended, combined, point, label="detected_light")
+        light = DetectedLight(
+            [tuple(state[:2])] * wavelength_count,
+            [tuple(state[2 + 3 * j : 5 + 3 * j]) for j in range(wavelength_count)],
         )
-        moved = mi.Bool(False)
-        for mean_x, mean_y in light.means:
-            moved |= dr.square(mean_x) + dr.square(mean_y) > 1e-12
-        moved &= ~film.transmitted
+        # the hero's mean direction serves the four wavelengths (``bsdfs.thin_film.film_at_directions``)
+        moved = (dr.square(light.means[0][0]) + dr.square(light.means[0][1]) > 1e-12) & ~film.transmitted
         path_shear = (dr.dot(film.separation, record.frame_x), dr.dot(film.separation, record.frame_y))
         beams = len(film.terms)
         params = self.kernels.params

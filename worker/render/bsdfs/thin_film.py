@@ -104,6 +104,7 @@ def detected_light(
     lobe_variance: mi.Spectrum,
     unbounded: mi.Bool | bool,
     rect_source: mi.Bool | bool,
+    visibility: VisibilityModel,
     wavelengths: mi.Spectrum,
 ) -> DetectedLight:
     """The source (mean offset, covariance C_s = Σ⊥/r², a uniform ellipse or, where ``rect_source``, a
@@ -114,10 +115,27 @@ def detected_light(
     normal's components (n·x, n·y, n·k)."""
     means, covariances = [], []
     offset_scale = dr.select(rect_source, PARALLELOGRAM_OFFSET_SCALE, ELLIPSE_OFFSET_SCALE)
+    shape = lobe_covariance_components(1.0, normal, OPS)  # the lobe's, at every wavelength (a scale)
+    # The lobe's axes: along the plane of incidence (n⊥), where the film's shear lies, and across it.
+    in_plane = dr.sqrt(dr.square(normal[0]) + dr.square(normal[1]))
+    tilted = in_plane > 1e-6
+    along_x = dr.select(tilted, normal[0] / dr.maximum(in_plane, 1e-30), 1.0)
+    along_y = dr.select(tilted, normal[1] / dr.maximum(in_plane, 1e-30), 0.0)
+    axes = ((along_x, along_y), (-along_y, along_x))
+    # One mode needs the spread along the shear only; modes need both axes' (their whitening).
+    truncate_across = len(visibility.disk_coefficients) > 1
     for j in range(len(wavelengths)):
-        lobe = lobe_covariance_components(lobe_variance[j], normal, OPS)
+        lobe = tuple(lobe_variance[j] * component for component in shape)
         mean, covariance = flat_top_product_components(
-            source_mean, source_cov, acceptance_mean, lobe, unbounded, offset_scale, OPS
+            source_mean,
+            source_cov,
+            acceptance_mean,
+            lobe,
+            unbounded,
+            offset_scale,
+            OPS,
+            axes,
+            truncate_across,
         )
         means.append(mean)
         covariances.append(covariance)
@@ -130,20 +148,21 @@ def film_at_directions(
     means: list[tuple[mi.Float, mi.Float]],
 ) -> tuple[list[mi.Spectrum], list[tuple[mi.Float, mi.Float]]]:
     """The film's reflectance terms and its transverse shear ξ (m) for light arriving from the exterior
-    along the detected mean directions (per wavelength: k_j ∝ (m_j, 1) in the basis of ``normal``), so
-    that the interference phase and the visibility's argument belong to the light that reaches the pixel."""
+    along the detected mean direction (k ∝ (m, 1) in the basis of ``normal``), so that the interference
+    phase and the visibility's argument belong to the light that reaches the pixel. The hero wavelength's
+    m (and its n_f for the shear) serves all four: the means differ only through the lobe's width ∝ λ,
+    where lobe and source are of a size, by a fraction of that width; one direction keeps the incidence
+    shared by the four wavelengths' terms (the kernels compute what depends on it once)."""
     params, material = spectra.params, spectra.material
     exterior = params.param(material, mat.EXTERIOR_IOR)
     thickness_m = params.param(material, mat.FILM_THICKNESS_M)
     film_n = spectra[mat.FILM_IOR_ID]
-    cosines, shears = [], []
-    for j, (mean_x, mean_y) in enumerate(means):
-        inverse_norm = dr.rsqrt(1.0 + mean_x * mean_x + mean_y * mean_y)
-        direction = (mean_x * inverse_norm, mean_y * inverse_norm, inverse_norm)
-        cosines.append(-(direction[0] * normal[0] + direction[1] * normal[1] + direction[2] * normal[2]))
-        shear = film_shear(normal, direction, thickness_m, film_n[j], exterior, OPS)
-        shears.append((shear[0], shear[1]))
-    return film_terms(spectra, cosines), shears
+    mean_x, mean_y = means[0]
+    inverse_norm = dr.rsqrt(1.0 + mean_x * mean_x + mean_y * mean_y)
+    direction = (mean_x * inverse_norm, mean_y * inverse_norm, inverse_norm)
+    cosine = -(direction[0] * normal[0] + direction[1] * normal[1] + direction[2] * normal[2])
+    shear = film_shear(normal, direction, thickness_m, film_n[0], exterior, OPS)  # the hero's n_f, as ever
+    return film_terms(spectra, cosine), [(shear[0], shear[1])] * len(means)
 
 
 def visible_reflectance(
@@ -216,6 +235,7 @@ class ThinFilm(RoughConductor):
             self.lobe_variance(point.wavelengths),
             coherence.acceptance_unbounded,
             coherence.rect_source,
+            self.params.visibility,
             point.wavelengths,
         )
         terms, shears = film_at_directions(point.spectra, normal, light.means)
