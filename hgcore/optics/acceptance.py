@@ -173,7 +173,6 @@ def flat_top_product_components(
     offset_scale: Any,
     ops: ArrayOps,
     axes: tuple[tuple[Any, Any], tuple[Any, Any]] | None = None,
-    truncate_second_axis: bool = True,
 ) -> tuple[tuple[Any, Any], tuple[Any, Any, Any]]:
     """(m, C) of a *uniform* source (covariance C_s, rad²) times a Gaussian acceptance: the mean and
     covariance of the acceptance restricted to the source (module docstring, "The product").
@@ -186,24 +185,15 @@ def flat_top_product_components(
     truncated there) — or ``PARALLELOGRAM_OFFSET_SCALE``. Limits: C_a → 0 gives (m_a, 0) inside the
     source (clamped into it); C_a → ∞ (or ``unbounded``) the source's own (m_s, C_s); C_s = 0 (a point
     source) gives (m_s, 0). An acceptance far outside the source (a faint lane) has its truncated moments
-    clamped into the source's box: its mean to the edge, its variance to the box's.
-
-    ``truncate_second_axis`` False: along the second axis the 1-D Gaussian product instead (no error
-    functions), for a caller that needs the first axis's moments only to first order in the second's — a
-    film's 0th-mode visibility, whose argument lies along its plane of incidence (``axes``' first)."""
+    clamped into the source's box: its mean to the edge, its variance to the box's."""
     sxx, sxy, syy = source_cov
     axx, axy, ayy = acceptance_cov
     axes = flat_top_axes(source_cov, acceptance_cov, ops) if axes is None else axes
     offset = (acceptance_mean[0] - source_mean[0], acceptance_mean[1] - source_mean[1])
     means, variances = [], []
-    for index, (ex, ey) in enumerate(axes):
+    for ex, ey in axes:
         source_var = ops.maximum(ex * ex * sxx + 2.0 * ex * ey * sxy + ey * ey * syy, 0.0)
         acceptance_var = ops.maximum(ex * ex * axx + 2.0 * ex * ey * axy + ey * ey * ayy, 0.0)
-        if index == 1 and not truncate_second_axis:
-            gain = acceptance_var / ops.maximum(acceptance_var + source_var, 1e-30)
-            means.append((1.0 - gain) * (ex * offset[0] + ey * offset[1]))
-            variances.append(gain * source_var)
-            continue
         half_width = math.sqrt(3.0) * ops.sqrt(source_var)
         along = (ex * offset[0] + ey * offset[1]) * offset_scale
         mean, variance, _ = _truncated_normal_moments(half_width, along, ops.sqrt(acceptance_var), ops)

@@ -211,7 +211,6 @@ def kernel_reflectance(wavelengths_nm: np.ndarray) -> np.ndarray:
         mi.Spectrum(0.0),
         True,
         coherence.rect_source,
-        kernels.visibility,
         wavelengths,
     )
     (film,) = renderer.compiled.material_table.indices_of(MaterialKind.THIN_FILM)

@@ -577,7 +577,6 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                 film.lobe_variance,
                 ~record.first,
                 resolved.rect_source,
-                self.kernels.visibility,
                 wavelengths,
             )
             return (*light.means[0], *(c for covariance in light.covariances for c in covariance))

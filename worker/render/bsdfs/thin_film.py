@@ -31,6 +31,7 @@ import mitsuba as mi
 from hgcore.optics.acceptance import (
     ELLIPSE_OFFSET_SCALE,
     PARALLELOGRAM_OFFSET_SCALE,
+    flat_top_axes,
     flat_top_product_components,
     lobe_acceptance_variance,
     lobe_covariance_components,
@@ -104,7 +105,6 @@ def detected_light(
     lobe_variance: mi.Spectrum,
     unbounded: mi.Bool | bool,
     rect_source: mi.Bool | bool,
-    visibility: VisibilityModel,
     wavelengths: mi.Spectrum,
 ) -> DetectedLight:
     """The source (mean offset, covariance C_s = Σ⊥/r², a uniform ellipse or, where ``rect_source``, a
@@ -116,14 +116,9 @@ def detected_light(
     means, covariances = [], []
     offset_scale = dr.select(rect_source, PARALLELOGRAM_OFFSET_SCALE, ELLIPSE_OFFSET_SCALE)
     shape = lobe_covariance_components(1.0, normal, OPS)  # the lobe's, at every wavelength (a scale)
-    # The lobe's axes: along the plane of incidence (n⊥), where the film's shear lies, and across it.
-    in_plane = dr.sqrt(dr.square(normal[0]) + dr.square(normal[1]))
-    tilted = in_plane > 1e-6
-    along_x = dr.select(tilted, normal[0] / dr.maximum(in_plane, 1e-30), 1.0)
-    along_y = dr.select(tilted, normal[1] / dr.maximum(in_plane, 1e-30), 0.0)
-    axes = ((along_x, along_y), (-along_y, along_x))
-    # One mode needs the spread along the shear only; modes need both axes' (their whitening).
-    truncate_across = len(visibility.disk_coefficients) > 1
+    # The axes of the combination: the source's for an anisotropic source (a tube: the product lies along
+    # it), the lobe's for a round one; a scale of the lobe leaves them, so they serve every wavelength.
+    axes = flat_top_axes(source_cov, shape, OPS)
     for j in range(len(wavelengths)):
         lobe = tuple(lobe_variance[j] * component for component in shape)
         mean, covariance = flat_top_product_components(
@@ -135,7 +130,6 @@ def detected_light(
             offset_scale,
             OPS,
             axes,
-            truncate_across,
         )
         means.append(mean)
         covariances.append(covariance)
@@ -235,7 +229,6 @@ class ThinFilm(RoughConductor):
             self.lobe_variance(point.wavelengths),
             coherence.acceptance_unbounded,
             coherence.rect_source,
-            self.params.visibility,
             point.wavelengths,
         )
         terms, shears = film_at_directions(point.spectra, normal, light.means)
