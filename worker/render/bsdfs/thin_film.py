@@ -113,24 +113,45 @@ def detected_light(
     ``acceptance_mean`` (v = 0: the specular part, a single direction), or every direction where
     ``unbounded`` (``hgcore.optics.acceptance.flat_top_product_components``). ``normal``: the film
     normal's components (n·x, n·y, n·k)."""
-    means, covariances = [], []
     offset_scale = dr.select(rect_source, PARALLELOGRAM_OFFSET_SCALE, ELLIPSE_OFFSET_SCALE)
     shape = lobe_covariance_components(1.0, normal, OPS)  # the lobe's, at every wavelength (a scale)
     # The axes of the combination: the source's for an anisotropic source (a tube: the product lies along
     # it), the lobe's for a round one; a scale of the lobe leaves them, so they serve every wavelength.
     axes = flat_top_axes(source_cov, shape, OPS)
-    for j in range(len(wavelengths)):
-        lobe = tuple(lobe_variance[j] * component for component in shape)
-        mean, covariance = flat_top_product_components(
-            source_mean,
-            source_cov,
-            acceptance_mean,
-            lobe,
-            unbounded,
-            offset_scale,
-            OPS,
-            axes,
+    # The combination at the hero wavelength (diagonal on these axes unless ``unbounded``). The others'
+    # lobes differ in width only (∝ λ): their spreads follow from the hero's per axis as Gaussians combine,
+    # 1/c_j = 1/c_0 − 1/a_0 + 1/a_j (a the lobe's variance on the axis, c the combined) — exact where the
+    # lobe is much narrower or much wider than the source, a quarter of the truncations.
+    hero_lobe = tuple(lobe_variance[0] * component for component in shape)
+    mean, hero_cov = flat_top_product_components(
+        source_mean, source_cov, acceptance_mean, hero_lobe, unbounded, offset_scale, OPS, axes
+    )
+    means, covariances = [mean], [hero_cov]
+    (e1x, e1y), (e2x, e2y) = axes
+    per_axis = []
+    for ex, ey in axes:
+        lobe_axis = ex * ex * shape[0] + 2.0 * ex * ey * shape[1] + ey * ey * shape[2]
+        combined = ex * ex * hero_cov[0] + 2.0 * ex * ey * hero_cov[1] + ey * ey * hero_cov[2]
+        source_axis = ex * ex * source_cov[0] + 2.0 * ex * ey * source_cov[1] + ey * ey * source_cov[2]
+        per_axis.append((lobe_axis, combined, dr.maximum(source_axis, 0.0)))
+    for j in range(1, len(wavelengths)):
+        variances = []
+        for lobe_axis, combined, source_axis in per_axis:
+            hero_a, other_a = lobe_variance[0] * lobe_axis, lobe_variance[j] * lobe_axis
+            information = dr.rcp(dr.maximum(combined, 1e-30)) - dr.rcp(dr.maximum(hero_a, 1e-30))
+            information = dr.maximum(information, 0.0) + dr.rcp(dr.maximum(other_a, 1e-30))
+            variance = dr.minimum(dr.rcp(information), source_axis)
+            variances.append(dr.select((combined > 0.0) & (other_a > 0.0), variance, combined))
+        c1, c2 = variances
+        covariance = (
+            c1 * e1x * e1x + c2 * e2x * e2x,
+            c1 * e1x * e1y + c2 * e2x * e2y,
+            c1 * e1y * e1y + c2 * e2y * e2y,
         )
+        if unbounded is not False:  # every direction of the source reaches the pixel: its own spread
+            covariance = tuple(
+                dr.select(unbounded, s, c) for s, c in zip(source_cov, covariance, strict=True)
+            )
         means.append(mean)
         covariances.append(covariance)
     return DetectedLight(means, covariances)
