@@ -39,7 +39,7 @@ def _probe(scene_name: str) -> float:
     try:
         from worker.render.chunks import renderer_for
     except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
-        from worker.render.api import renderer_for  # type: ignore[no-redef]
+        from worker.render.chunks import renderer_for  # type: ignore[no-redef]
 
     data = json.loads((ROOT / "schemas" / "examples" / scene_name).read_text())
     data["film"] = {**data["film"], "width": SIZE_PX, "height": SIZE_PX, "spp": SPP, "bands": BANDS}

@@ -65,7 +65,7 @@ def probe(resolution_px: int, spp: int, bands: int, target_rel_error: float = 0.
     try:
         from worker.render.chunks import render_scene
     except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
-        from worker.render.api import render_scene  # type: ignore[no-redef]
+        from worker.render.chunks import render_scene  # type: ignore[no-redef]
 
     target = NoiseTarget(rel_error=target_rel_error) if target_rel_error > 0 else None
 

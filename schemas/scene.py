@@ -335,13 +335,20 @@ class Transform(StrictModel):
 
 
 class PerspectiveCamera(StrictModel):
-    """A pinhole camera.
+    """A perspective camera: a pinhole, or a thin lens when ``aperture_radius_m`` > 0.
 
     Placement: ``origin_m`` + ``target_m`` + ``up`` (look-at), or ``to_world`` — a 4x4 row-major
     camera-to-world matrix in Mitsuba's camera convention (camera looks along local +Z, +Y is up,
     +X points to the image's left). Field of view: ``fov_deg`` (horizontal, degrees) or
     ``focal_length_mm`` + ``sensor_width_mm`` (horizontal fov = 2·atan(sensor_width / (2·focal_length)));
     when neither is given the horizontal fov is 40°.
+
+    Thin lens (Mitsuba's ``thinlens``): a lens of radius ``aperture_radius_m`` centred on the origin,
+    focused on the plane ``focus_distance_m`` in front of it along the view axis (default: the target's
+    distance, for a look-at camera). A pixel then collects the cone of rays through the lens that meet at
+    its point of that plane, so depth of field and the angular spread of the light a pixel receives
+    (which sets the fringe visibility of a smooth film it sees, docs/physics_interactions.md §3) follow
+    from the aperture. 0 is a pinhole (the default).
     """
 
     type: Literal["perspective"] = "perspective"
@@ -354,6 +361,8 @@ class PerspectiveCamera(StrictModel):
     sensor_width_mm: PositiveFloat | None = None
     near_clip_m: PositiveFloat = 1e-3
     far_clip_m: PositiveFloat = 1e4
+    aperture_radius_m: NonNegativeFloat = 0.0
+    focus_distance_m: PositiveFloat | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> PerspectiveCamera:
@@ -382,6 +391,10 @@ class PerspectiveCamera(StrictModel):
             raise InputError("focal_length_mm and sensor_width_mm must be given together")
         if self.far_clip_m <= self.near_clip_m:
             raise InputError("far_clip_m must be greater than near_clip_m")
+        if self.aperture_radius_m > 0.0 and self.focus_distance_m is None and self.to_world is not None:
+            raise InputError(
+                "focus_distance_m: required for a thin lens (aperture_radius_m > 0) placed by to_world"
+            )
         return self
 
     def horizontal_fov_deg(self) -> float:
@@ -391,6 +404,14 @@ class PerspectiveCamera(StrictModel):
         if self.focal_length_mm is not None and self.sensor_width_mm is not None:
             return math.degrees(2.0 * math.atan(self.sensor_width_mm / (2.0 * self.focal_length_mm)))
         return 40.0
+
+    def focus_distance(self) -> float:
+        """The thin lens's focus distance along the view axis (m): ``focus_distance_m``, or the target's
+        distance for a look-at camera."""
+        if self.focus_distance_m is not None:
+            return self.focus_distance_m
+        assert self.origin_m is not None and self.target_m is not None  # guaranteed by the validator
+        return math.dist(self.origin_m, self.target_m)
 
 
 #: ``film.wavelength_sampling``: how a sample's wavelengths are drawn (docs/scenes.md, Film).

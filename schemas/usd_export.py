@@ -6,7 +6,8 @@ UsdLux / UsdShade data so DCC tools display it, and as its exact hgrender model 
 
 Standard data written (units: stage units = metres):
 * camera → ``UsdGeom.Camera``; horizontalAperture/focalLength in tenths of a scene unit (USD's lens units),
-  so a 36 mm aperture is 0.36 at 1 m per unit; clippingRange = (near_clip_m, far_clip_m).
+  so a 36 mm aperture is 0.36 at 1 m per unit; clippingRange = (near_clip_m, far_clip_m); a thin lens as
+  fStop = focal length / (2 · aperture radius) and focusDistance (scene units).
 * sphere / cylinder shapes → ``UsdGeom.Sphere`` / ``UsdGeom.Cylinder`` (axis Z) placed by xform ops;
   rectangle, disk (48-gon), inline meshes and procedural shapes (shell, wavy sheet, optical disc, backdrop:
   the generated triangles, vertex normals and ``st`` texture coordinates) → ``UsdGeom.Mesh``; mesh files →
@@ -146,6 +147,11 @@ def _write_camera(stage: Usd.Stage, camera: PerspectiveCamera) -> None:
     usd_camera.CreateFocalLengthAttr(focal_length_mm / 100.0)
     usd_camera.CreateProjectionAttr(UsdGeom.Tokens.perspective)
     usd_camera.CreateClippingRangeAttr(Gf.Vec2f(camera.near_clip_m, camera.far_clip_m))
+    if camera.aperture_radius_m > 0.0:
+        # A thin lens: N = f/(2a) with f in metres (the attribute's value / 10 at 1 m per unit); the focus
+        # distance in scene units. fStop 0 (USD's default) is a pinhole.
+        usd_camera.CreateFStopAttr(focal_length_mm / 1000.0 / (2.0 * camera.aperture_radius_m))
+        usd_camera.CreateFocusDistanceAttr(camera.focus_distance())
     write_hg_attributes(usd_camera.GetPrim(), camera.model_dump(mode="json"))
 
 

@@ -15,7 +15,8 @@ Mapping (details and units in docs/scenes.md). C maps stage coordinates to hgren
   ``sphere``/``cylinder`` (a ``transform`` matrix when the world transform is not a similarity).
   Instances (instanceable prims) are flattened through instance proxies; invisible prims and the
   ``guide``/``proxy`` purposes are skipped; other geometry types are rejected.
-* ``UsdGeom.Camera`` (the first one) → look-at camera; focalLength and horizontalAperture are in tenths
+* ``UsdGeom.Camera`` (the first one) → look-at camera (a thin lens where fStop > 0: radius
+  focalLength/(2·fStop), focused at focusDistance); focalLength and horizontalAperture are in tenths
   of a scene unit, i.e. value × metersPerUnit × 100 mm; clippingRange × metersPerUnit.
 * ``UsdLux`` Sphere/Cylinder (length along local X)/Rect (emits along −Z)/Disk lights → emitters with
   ``radiance_scale = intensity · 2^exposure / (K_m ∫ r ȳ dλ)`` (r = 1, or B_λ(colorTemperature) when
@@ -417,16 +418,27 @@ class _StageConverter:
         # Lens attributes are in tenths of a scene unit: value × metersPerUnit / 10 m = value × mpu × 100 mm.
         millimetres_per_value = self.meters_per_unit * 100.0
         near, far = camera.GetClippingRangeAttr().Get()
-        return {
+        focal_length_mm = float(camera.GetFocalLengthAttr().Get()) * millimetres_per_value
+        data = {
             "type": "perspective",
             "origin_m": origin.tolist(),
             "target_m": (origin + np.asarray(_unit(forward))).tolist(),
             "up": _unit(up),
-            "focal_length_mm": float(camera.GetFocalLengthAttr().Get()) * millimetres_per_value,
+            "focal_length_mm": focal_length_mm,
             "sensor_width_mm": float(camera.GetHorizontalApertureAttr().Get()) * millimetres_per_value,
             "near_clip_m": float(near) * self.meters_per_unit,
             "far_clip_m": float(far) * self.meters_per_unit,
         }
+        # Depth of field: fStop > 0 is a thin lens of radius f/(2N) focused at focusDistance (scene units,
+        # along the view axis); fStop 0, USD's default, a pinhole.
+        f_stop = float(camera.GetFStopAttr().Get() or 0.0)
+        if f_stop > 0.0:
+            focus_m = float(camera.GetFocusDistanceAttr().Get() or 0.0) * self.meters_per_unit
+            if not focus_m > 0.0:
+                raise SceneError.at(_where(prim), "focusDistance: must be > 0 when fStop > 0 (a thin lens)")
+            data["aperture_radius_m"] = focal_length_mm * 1e-3 / (2.0 * f_stop)
+            data["focus_distance_m"] = focus_m
+        return data
 
 
 def _texture_coordinate_primvars(

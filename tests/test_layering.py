@@ -175,3 +175,20 @@ def test_a_worker_process_runs_without_the_service_package() -> None:
     )
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.strip() == "tasks: 4"
+
+
+def test_no_test_module_imports_another_or_a_conftest() -> None:
+    """Shared test code lives in ``tests/support`` (tests/README.md): a test module that imports another
+    runs the other's module-level code and couples their fixtures; a conftest is pytest's, not a library."""
+    import ast
+
+    offenders = []
+    for path in sorted((REPO_ROOT / "tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            names += [alias.name for alias in node.names] if isinstance(node, ast.Import) else []
+            for name in names:
+                last = name.rsplit(".", 1)[-1]
+                if name.startswith("tests.") and (last.startswith("test_") or last == "conftest"):
+                    offenders.append(f"{path.relative_to(REPO_ROOT)} imports {name}")
+    assert offenders == []

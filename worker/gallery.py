@@ -47,6 +47,18 @@ def gallery_scene(entry: GalleryEntry, size_px: int | None, spp: int | None) -> 
     return scene
 
 
+def camera_description(entry: GalleryEntry) -> str:
+    """The example's camera in words: its aperture sets how much of a source a smooth film shows a pixel
+    (docs/physics_interactions.md §3, "What a pixel sees")."""
+    camera = gallery_scene(entry, None, None)["camera"]
+    radius_m = float(camera.get("aperture_radius_m", 0.0))
+    if radius_m <= 0.0:
+        return "a pinhole (each ray of a pixel sees one direction of a source in a mirror-like film)"
+    focus = camera.get("focus_distance_m")
+    focus_text = f"{focus} m" if focus is not None else "its target"
+    return f"a thin lens of radius {radius_m * 1e3:g} mm focused at {focus_text}"
+
+
 def render_entry(entry: GalleryEntry, size_px: int | None, spp: int | None, out_dir: Path) -> dict[str, Any]:
     """Render one entry into ``out_dir``; its summary.json gains ``wall_s`` and ``gallery`` fields."""
     from worker.render.chunks import render_scene
@@ -118,6 +130,7 @@ def write_doc(summaries: dict[str, dict[str, Any]]) -> None:
             ]
         else:
             lines += [f"Not rendered yet (paper: {entry.paper_time}).", ""]
+        lines += [f"Camera: {camera_description(entry)}.", ""]
         lines += [f"What to look for: {entry.look_for}", ""]
     lines += convergence_section()
     atomic_write_bytes(DOC_PATH, "\n".join(lines).encode())

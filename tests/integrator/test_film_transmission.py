@@ -1,14 +1,15 @@
-"""Light transmitted by a thin film on glass: T(V) = 1 − R(V), with the visibility of the light it transmits.
+"""Light transmitted by a thin film on glass: T(V) = 1 − R(V), with the visibility of the light a pixel sees.
 
 The camera looks at a coated glass surface at 45°; below it, inside the glass, an emitting sphere sits on
 the refracted ray at r = 0.5 m. Every camera path that refracts hits the sphere directly, so the pixel is
-L_e·T(V)/n_s² (radiance is divided by n² leaving the denser medium), with T(V) the film's partially
-coherent transmittance at 45° and V_d = V₁^{d²}, V₁ = exp(−½ (k/r)² |s⊥|² R²/4) (0th mode, Σ⊥ of the
-sphere R²/4 I; |s⊥| = 2τ tan θ_f cos θ_s, the film shear seen across the beam arriving from the substrate,
-n_s sin θ_s = n_f sin θ_f; ``hgcore.optics.thin_film.film_shear``). The reference evaluates
-that with ``hgcore.optics`` per wavelength and averages it over each band (Simpson, 2 nm steps); a small
-sphere (V₁ ≈ 1) and a large one (V₁ ≈ 0.27 at 550 nm) must both match, and their difference — the fringe
-contrast the partial coherence removes from the transmitted light — must be resolved.
+L_e·T/n_s² (radiance is divided by n² leaving the denser medium). The camera is a pinhole and the film's
+transmission specular: each pixel receives the plane wave of one point of the sphere, refracted at one
+angle, so T is the film's *coherent* transmittance there whatever the sphere's size (V_d = 1;
+docs/physics_interactions.md §3, "What a pixel sees") — a small sphere (ℓ ≫ the shear) and a large one
+(the paper's Eq. 18 would give V₁ ≈ 0.27 at 550 nm: the whole sphere's Σ⊥ at the film shear) give the same
+image. The reference evaluates T(V = 1) = 1 − R of the every-beam sum with ``hgcore.optics`` per wavelength
+and averages it over each band (Simpson, 2 nm steps); the second test checks that the paper's partially
+coherent T(V₁) differs from it by far more than the tolerance, so the renders tell the two apart.
 
 Noise: the only random choice is reflect (probability R ≈ 0.15) or refract; a refracted path carries
 T/(1 − R_hero) per wavelength. 4 pixels × 1024 spp over 16 bands give a standard error ≈ 0.3 % of a
@@ -73,7 +74,9 @@ def scene(sphere_radius_m: float) -> dict:
     )
 
 
-def expected_band_values(sphere_radius_m: float, edges_nm: np.ndarray) -> np.ndarray:
+def expected_band_values(sphere_radius_m: float | None, edges_nm: np.ndarray) -> np.ndarray:
+    """Band means of L_e·T(V)/n_s² with V_d = V₁^{d²} of a sphere of radius ``sphere_radius_m`` at r (the
+    paper's Eq. 18: V₁ = exp(−½ (k/r)² |s⊥|² R²/4), 0th mode), or V ≡ 1 (``None``: what a pinhole sees)."""
     values = []
     for low, high in itertools.pairwise(edges_nm):
         intervals = 2 * math.ceil((high - low) / 4.0)  # even (Simpson), ≤ 2 nm steps
@@ -84,7 +87,8 @@ def expected_band_values(sphere_radius_m: float, edges_nm: np.ndarray) -> np.nda
             cos_i, wavelengths_m, THICKNESS_M, FILM_IOR, substrate, 1.0, BEAMS, NUMPY
         )
         k = 2 * math.pi / wavelengths_m
-        first = np.exp(-0.5 * (k / DISTANCE_M) ** 2 * SHEAR_TRANSVERSE_M**2 * sphere_radius_m**2 / 4)
+        radius_m = 0.0 if sphere_radius_m is None else sphere_radius_m
+        first = np.exp(-0.5 * (k / DISTANCE_M) ** 2 * SHEAR_TRANSVERSE_M**2 * radius_m**2 / 4)
         visibilities = gaussian_visibilities(first, BEAMS - 1, NUMPY)
         transmittance = combine_reflectance_terms(transmission_terms(terms), visibilities)
         radiance = transmittance / SUBSTRATE_IOR**2
@@ -105,19 +109,21 @@ def rendered_band_values(sphere_radius_m: float, tmp_path: Path) -> tuple[np.nda
 
 
 @pytest.mark.parametrize("sphere_radius_m", [0.005, 0.3])
-def test_transmitted_light_follows_one_minus_partially_coherent_reflectance(
+def test_transmitted_light_is_the_coherent_transmittance_at_a_pinhole(
     sphere_radius_m: float, tmp_path: Path
 ) -> None:
     values, error, bands = rendered_band_values(sphere_radius_m, tmp_path)
     centres = np.array([float(name[3:-2].replace(",", ".")) for name in bands])
     width = centres[1] - centres[0]
     edges = np.concatenate([centres - width / 2, [centres[-1] + width / 2]])
-    expected = expected_band_values(sphere_radius_m, edges)
+    expected = expected_band_values(None, edges)
     assert np.all(np.abs(values - expected) <= 5 * error + 0.005 * expected), (values, expected, error)
 
 
-def test_partial_coherence_changes_the_transmitted_fringes() -> None:
-    """The two sources' references differ by far more than the test's tolerance (it can fail)."""
+def test_the_paper_s_washout_differs_from_what_a_pinhole_sees() -> None:
+    """The large sphere's Eq. 18 reference (its whole Σ⊥ at the film shear) differs from the coherent one
+    by far more than the test's tolerance: the render above tells the two apart (it failed before the
+    detector was taken into account, reading the partially coherent values)."""
     edges = np.linspace(380.0, 780.0, 17)
-    small, large = expected_band_values(0.005, edges), expected_band_values(0.3, edges)
-    assert np.max(np.abs(small - large) / small) > 0.05  # ≈ 7 %, vs a tolerance of ≈ 2 %
+    coherent, washed_out = expected_band_values(None, edges), expected_band_values(0.3, edges)
+    assert np.max(np.abs(coherent - washed_out) / coherent) > 0.05  # ≈ 7 %, vs a tolerance of ≈ 2 %

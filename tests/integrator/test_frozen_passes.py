@@ -18,6 +18,7 @@ import pytest
 from schemas import validate_scene
 from tests.integrator.furnace import furnace_scene, sphere
 from tests.support.scenes import example
+from tests.support.sums import assert_bitwise_equal, sums_of
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.renderer import Renderer
 from worker.render.scene_compiler import SceneCompiler
@@ -59,16 +60,6 @@ def rough_glass() -> dict:
 def fresh_renderer(scene: dict) -> Renderer:
     """A renderer of its own (``renderer_for`` shares one per scene across tests)."""
     return Renderer(SceneCompiler(configured_mitsuba()).compile(validate_scene(scene)))
-
-
-def sums_of(renderer: Renderer, seed: int) -> dict[str, np.ndarray]:
-    sums = renderer.render_sums(SPP, seed)
-    return {"bands": sums.bands, "bands_sq": sums.bands_sq, **sums.values}
-
-
-def assert_bitwise_equal(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> None:
-    assert a.keys() == b.keys()
-    assert [key for key in a if not np.array_equal(a[key], b[key])] == []
 
 
 SCENES = {**{name: (lambda name=name: small(name)) for name in EXAMPLES}, "rough_glass": rough_glass}

@@ -254,6 +254,27 @@ def test_camera_fov_from_lens_and_default() -> None:
     assert problems_of(data)[0]["pointer"] == "/camera"
 
 
+def test_thin_lens_focus_defaults_to_the_target_and_is_validated() -> None:
+    """A look-at thin lens focuses on the target unless told; one placed by ``to_world`` must be told; a
+    negative aperture is refused; 0 (the default) is a pinhole."""
+    camera = PerspectiveCamera.model_validate({"origin_m": [0, 3, 4], "target_m": [0, 0, 0]})
+    assert (camera.aperture_radius_m, camera.focus_distance()) == (0.0, 5.0)
+    lens = PerspectiveCamera.model_validate(
+        {"origin_m": [0, 3, 4], "target_m": [0, 0, 0], "aperture_radius_m": 0.01, "focus_distance_m": 2.0}
+    )
+    assert lens.focus_distance() == 2.0
+    data = minimal_scene()
+    data["camera"] = {
+        "to_world": [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 5], [0, 0, 0, 1]],
+        "aperture_radius_m": 0.01,
+    }
+    problem = problems_of(data)[0]
+    assert problem["pointer"] == "/camera" and "focus_distance_m" in problem["message"]
+    data = minimal_scene()
+    data["camera"]["aperture_radius_m"] = -0.01
+    assert problems_of(data)[0]["pointer"] == "/camera/aperture_radius_m"
+
+
 @given(
     axis=st.lists(st.floats(-1, 1), min_size=3, max_size=3).filter(
         lambda a: math.fsum(c * c for c in a) > 1e-3

@@ -41,6 +41,8 @@ def test_round_trip_covers_every_shape_transform_and_camera_form(tmp_path: Path)
         "focal_length_mm": 35.0,
         "sensor_width_mm": 24.0,
         "near_clip_m": 0.01,
+        "aperture_radius_m": 0.004,
+        "focus_distance_m": 2.5,
     }
     data["film"] = {"width": 40, "height": 24, "bands": 8, "wavelength_min_nm": 400.5, "seed": 7, "modes": 4}
     data["materials"] |= {
@@ -143,11 +145,15 @@ def test_standard_usd_data_alone_reproduces_geometry_light_and_camera(tmp_path: 
     to a few float32 ulps (relative 1e-6); positions built from double matrices agree to 1e-6 m.
     """
     scene = load_example("thin_film_cylinder_light.json")
+    # A thin lens focused on the target (fStop = f/(2a), focusDistance in scene units).
+    scene = scene.model_copy(update={"camera": scene.camera.model_copy(update={"aperture_radius_m": 0.01})})
     usd_path = scene_to_usd(scene, tmp_path / "generic.usda")
     _strip_hg_geometry(usd_path)
     imported = import_usd(usd_path)
     assert imported.camera.horizontal_fov_deg() == pytest.approx(scene.camera.horizontal_fov_deg(), rel=1e-6)
     assert imported.camera.origin_m == pytest.approx(scene.camera.origin_m, abs=1e-6)
+    assert imported.camera.aperture_radius_m == pytest.approx(0.01, rel=1e-6)
+    assert imported.camera.focus_distance() == pytest.approx(scene.camera.focus_distance(), rel=1e-6)
     sphere, floor = imported.shapes
     assert isinstance(sphere, SphereShape)
     assert sphere.center_m == pytest.approx([0, 0, 0], abs=1e-9)
@@ -234,6 +240,8 @@ def _author_test_stage(bundle: Path) -> Path:
     camera.CreateFocalLengthAttr(50.0)
     camera.CreateHorizontalApertureAttr(36.0)
     camera.CreateClippingRangeAttr(Gf.Vec2f(1.0, 100000.0))
+    camera.CreateFStopAttr(2.0)
+    camera.CreateFocusDistanceAttr(400.0)
 
     light = UsdLux.CylinderLight.Define(stage, "/World/Tube")
     light.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 300.0))
@@ -261,6 +269,9 @@ def test_authored_stage_imports_expected_values(tmp_path: Path) -> None:
     assert camera.focal_length_mm == pytest.approx(50.0, rel=1e-6)
     assert camera.sensor_width_mm == pytest.approx(36.0, rel=1e-6)
     assert (camera.near_clip_m, camera.far_clip_m) == pytest.approx((0.01, 1000.0), rel=1e-6)
+    # f/2 at 50 mm: a lens of radius 50 mm / (2 × 2) = 12.5 mm, focused at 400 cm along the view axis.
+    assert camera.aperture_radius_m == pytest.approx(0.0125, rel=1e-6)
+    assert camera.focus_distance_m == pytest.approx(4.0, rel=1e-6)
 
     # Two instances of a referenced 10 cm quad, flattened and triangulated; shared hg: thin film.
     tiles = [shape for shape in scene.shapes if isinstance(shape, MeshShape)]
@@ -314,6 +325,17 @@ def test_distant_light_is_rejected_with_its_prim_path(tmp_path: Path) -> None:
     # Not mapped from UsdLux yet (issue 28); an hgrender sun (hg:type "sun") is what it would map onto.
     assert "DistantLight is not mapped yet" in caught.value.problems[0]["message"]
     assert 'hg:type "sun"' in caught.value.problems[0]["message"]
+
+
+def test_thin_lens_without_focus_distance_is_rejected_with_its_prim_path(tmp_path: Path) -> None:
+    stage_path = _author_test_stage(tmp_path)
+    stage = Usd.Stage.Open(str(stage_path))
+    UsdGeom.Camera(stage.GetPrimAtPath("/World/Camera")).GetFocusDistanceAttr().Set(0.0)
+    stage.Save()
+    with pytest.raises(SceneError) as caught:
+        import_usd(stage_path)
+    assert caught.value.problems[0]["pointer"] == "</World/Camera>"
+    assert "focusDistance" in caught.value.problems[0]["message"]
 
 
 def test_invalid_hg_attribute_is_named(tmp_path: Path) -> None:

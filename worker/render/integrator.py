@@ -18,20 +18,29 @@ leaves a *pending* record, resolved at the next non-specular vertex or emitter h
   vertex (Θ is kept and r grows through Dirac interactions — §5 "Perfectly specular reflectors");
 * ``frame_x``/``frame_y``: the transverse frame of the pending vertex's incident beam, reflected through
   the chain so that the source's Σ⊥ lands in that vertex's frame;
-* ``film_separation``: for a thin-film vertex, the film shear s (m) between successive beams
-  (``hgcore.optics.thin_film.film_shear``, 2τ tan θ_t in the plane of incidence),
-  also carried through the chain, and its partially-coherent reflectance terms (linear in the visibilities).
+* ``PendingCoating``: for a thin-film vertex, the film shear s (m) between successive beams
+  (``hgcore.optics.thin_film.film_shear``, 2τ tan θ_t in the plane of incidence), also carried through the
+  chain, its partially-coherent reflectance terms (linear in the visibilities), and what it passes on
+  towards the pixel (its acceptance: one direction for its specular part, its lobe's width otherwise).
 
 At resolution the source is the emitter (whole emitter, BRIEF) or a non-specular surface: a *secondary*
 incoherent source whose extent is the part of that surface that is lit and seen from the receiver (van
 Cittert–Zernike, docs/physics.md §7). Its points are mutually incoherent, so each path, which reaches one
 point of it, carries a point source (Σ⊥ = 0, phase along the sampled direction); averaging the paths
-gives the partially coherent response of the whole lit patch. A material's explicit
-``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane. The
-environment (light from infinity in every direction, reached by rays that leave the scene) is treated the
-same way: a plane wave from the path's direction per path, van Cittert–Zernike over the paths (docs/physics.md
-§9). Textured material parameters are read at each vertex before its branches (``VertexSpectra``), so the
-coherence maths sees their local values (a film's local thickness sets its shear and phase).
+gives the partially coherent response of the part of the lit patch the pixel sees. A material's explicit
+``scattering_region_radius_m`` overrides this with a uniform disk of that radius in its tangent plane.
+The environment (light from infinity in every direction, reached by rays that leave the scene) is treated
+the same way: a plane wave from the path's direction per path, van Cittert–Zernike over the paths
+(docs/physics.md §9). Textured material parameters are read at each vertex before its branches
+(``VertexSpectra``), so the coherence maths sees their local values (a film's local thickness sets its shear
+and phase).
+
+What a pixel sees (docs/physics_interactions.md §3): a film evaluates each plane wave of an incoherent
+source coherently, so a pixel sees its fringes averaged over the source directions the film (and the
+camera's lens, whose cone the paths sample) pass towards it. ``_film_factor`` and the film's next-event
+evaluation combine the source with the film's acceptance (``bsdfs.thin_film.detected_light``) and take the
+film's phase at the mean direction of what reaches the pixel; beyond a non-specular vertex the whole source
+does (the paper's Eq. 18).
 
 Diagnostics (BRIEF): M = (k/r)²Σ⊥ at λ = 550 nm of the light incident at the first non-specular vertex,
 luminance-weighted over the pixel's paths: next-event contributions there use the emitter's Σ⊥, light
@@ -61,9 +70,14 @@ from worker.render.bsdfs import (
     MaterialSample,
     VertexSpectra,
     VisibilityModel,
-    film_reflectance,
 )
 from worker.render.bsdfs.lobes import mean_over_wavelengths
+from worker.render.bsdfs.thin_film import (
+    DetectedLight,
+    detected_light,
+    film_at_directions,
+    visible_reflectance,
+)
 from worker.render.drjit_ops import drjit_ops
 from worker.render.emitters import (
     FAR_DISTANCE_M,
@@ -200,7 +214,6 @@ class PendingVertex:
     # transverse frame of that vertex's incident beam, reflected through the specular chain
     frame_x: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     frame_y: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
-    chain_specular: mi.Bool = field(default_factory=lambda: mi.Bool(False))  # through a mirror/refraction
 
 
 @loop_struct
@@ -212,8 +225,14 @@ class PendingCoating:
     # the film shear s (m) between successive beams, carried through the specular chain like the frame
     separation: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0))
     material: mi.UInt32 = field(default_factory=lambda: mi.UInt32(0))
-    position: mi.Point3f = field(default_factory=lambda: mi.Point3f(0.0))
-    normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, 1.0))
+    # The film normal's components (n·x, n·y, n·k) in the record's frame (x, y) and sampled incident
+    # direction k: the chain maps all three alike, so they hold at the source's end too.
+    normal: mi.Vector3f = field(default_factory=lambda: mi.Vector3f(0.0, 0.0, -1.0))
+    # The film's acceptance (``bsdfs.thin_film.detected_light``): the centre of its lobe relative to k (rad,
+    # in the record's frame) and its per-axis variance per wavelength (rad²; 0: the specular part or
+    # transmission, which pass one direction).
+    acceptance_mean: mi.Point2f = field(default_factory=lambda: mi.Point2f(0.0))
+    lobe_variance: mi.Spectrum = field(default_factory=lambda: mi.Spectrum(0.0))
     thickness: mi.Float = field(default_factory=lambda: mi.Float(0.0))  # τ (m) there (a texture's)
     # [R_incoherent, X_1 …] at the sampled direction (linear in the visibilities V_d); none without films
     terms: list[mi.Spectrum] = field(default_factory=list)
@@ -487,7 +506,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         vertex: Vertex,
         emitter_row: mi.UInt32,
         segment: mi.Float,
-        ray_origin: mi.Point3f,
+        ray: mi.Ray3f,
         wavelengths: mi.Spectrum,
         path: PathState,
         record: PendingVertex,
@@ -515,7 +534,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             source_sigma = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0))
         # An emitter's coherence propagates from its centre (as in NEE): the last segment's length
         # becomes the distance from the segment's origin to that centre.
-        centre_distance, _ = emitter_direction(mi, self.context.emitter_flat, emitter_row, ray_origin)
+        centre_distance, from_centre = emitter_direction(mi, self.context.emitter_flat, emitter_row, ray.o)
         record.chain_distance = dr.select(
             vertex.hit_emitter, record.chain_distance - segment + centre_distance, record.chain_distance
         )
@@ -537,14 +556,22 @@ class HGPathIntegrator(mi.SamplingIntegrator):
         if self.kernels.has(mat.INTERFERENCE_KINDS):
             # A symbolic branch: most resolved records are not a film's (the diffuse floor's), and packets
             # without a film lane skip the visibilities of every beam.
+            def film_factor(beta: mi.Spectrum) -> mi.Spectrum:
+                # The emitter's centre seen along the chain: its offset Δ ⟂ the last segment, over the
+                # unfolded distance r, is the centre's direction relative to the path at the film.
+                to_centre = -centre_distance * from_centre
+                across = to_centre - dr.dot(to_centre, ray.d) * ray.d
+                # (none for the environment: a plane wave from the path's own direction)
+                scale = dr.select(
+                    vertex.hit_emitter & ~environment & (not self.plane_waves),
+                    -dr.rcp(record.chain_distance),
+                    0.0,
+                )
+                source_mean = (scale * dr.dot(across, record.frame_x), scale * dr.dot(across, record.frame_y))
+                return beta * self._film_factor(wavelengths, record, coating, resolved, source_mean)
+
             path.beta = dr.if_stmt(
-                (path.beta,),
-                resolve & coating.pending,
-                lambda beta: (
-                    beta * self._film_factor(vertex, emitter_row, wavelengths, record, coating, resolved)
-                ),
-                lambda beta: beta,
-                label="film_factor",
+                (path.beta,), resolve & coating.pending, film_factor, lambda beta: beta, label="film_factor"
             )
         record_first = resolve & record.first
         first_vertex.indirect = dr.select(
@@ -561,39 +588,78 @@ class HGPathIntegrator(mi.SamplingIntegrator):
 
     def _film_factor(
         self,
-        vertex: Vertex,
-        emitter_row: mi.UInt32,
         wavelengths: mi.Spectrum,
         record: PendingVertex,
         coating: PendingCoating,
         resolved: IncidentCoherence,
+        source_mean: tuple[mi.Float, mi.Float],
     ) -> mi.Spectrum:
-        """R(V)/R_incoherent of a pending film whose incident light is now ``resolved``: the path was
-        sampled with the incoherent part at its own direction, so its throughput takes the relative
-        interference modulation of the phase direction.
+        """R(V)/R_incoherent of a pending film whose incident light is now ``resolved`` (Σ⊥ in the record's
+        frame, r) from a source whose centre lies at ``source_mean`` (rad) from the path's direction: the
+        path was sampled with the incoherent part at its own direction, so its throughput takes the
+        relative interference modulation of the light the film passes towards the pixel
+        (``bsdfs.thin_film.detected_light``; docs/physics_interactions.md §3, "What a pixel sees").
 
-        An emitter reached straight from the film has its interference phase taken towards the emitter's
-        centre (BRIEF), as in next-event estimation (the terms there: a symbolic branch, rarely taken);
-        through mirrors, along the path."""
-        phase_terms = list(coating.terms)
-        if not self.plane_waves:
-            centre_phase = vertex.hit_emitter & ~record.chain_specular & ~coating.transmitted
-            centre_phase &= ~self._is_environment(emitter_row)  # its phase is the path's own direction
+        The film's specular part, seen from the camera through mirrors and glass only, passes one direction
+        of the source: the path's own (V = 1, the sampled terms). Its lobe passes its width around the
+        mirror direction, and a film seen through a non-specular vertex the whole source
+        (``~record.first``): there the phase is that of the detected mean direction, whose terms and shear
+        are evaluated here (a symbolic branch; transmitted light keeps the path's phase)."""
+        inverse_r2 = dr.rcp(dr.square(dr.maximum(resolved.distance_m, 1e-9)))
+        source_cov = (
+            resolved.sigma_xx * inverse_r2,
+            resolved.sigma_xy * inverse_r2,
+            resolved.sigma_yy * inverse_r2,
+        )
+        wavelength_count = len(wavelengths)
 
-            def centre_terms(*_: mi.Spectrum) -> list[mi.Spectrum]:
-                table = self.context.emitter_flat
-                _, emitter_to_film = emitter_direction(mi, table, emitter_row, coating.position)
-                cos_centre = -dr.dot(emitter_to_film, coating.normal)
-                thickness = coating.thickness if self._film_thickness_textured() else None
-                return list(self.kernels.film_terms(coating.material, cos_centre, wavelengths, thickness))
+        def combined(*_: mi.Float) -> tuple[mi.Float, ...]:
+            light = detected_light(
+                tuple(coating.normal),
+                source_mean,
+                source_cov,
+                tuple(coating.acceptance_mean),
+                coating.lobe_variance,
+                ~record.first,
+                resolved.rect_source,
+                wavelengths,
+            )
+            return (*light.means[0], *(c for covariance in light.covariances for c in covariance))
 
-            def kept(*terms: mi.Spectrum) -> list[mi.Spectrum]:
-                return list(terms)
+        def point(*_: mi.Float) -> tuple[mi.Float, ...]:
+            return (*source_mean, *([mi.Float(0.0)] * (3 * wavelength_count)))
 
-            phase_terms = dr.if_stmt(tuple(phase_terms), centre_phase, centre_terms, kept, label="centre")
-        visibility = self.kernels.visibility
-        film_factor = film_reflectance(phase_terms, visibility, resolved, coating.separation, wavelengths)
-        return film_factor / dr.maximum(phase_terms[0], 1e-12)
+        # A point of a secondary source (Σ⊥ = 0) is what reaches the pixel whatever the film passes (C = 0,
+        # the path's own point): a symbolic branch spares those lanes (most film records' in most scenes)
+        # the combination.
+        extended = (resolved.sigma_xx + resolved.sigma_yy) > 0.0
+        state = dr.if_stmt(tuple(point()), extended, combined, point, label="detected_light")
+        light = DetectedLight(
+            [tuple(state[:2])] * wavelength_count,
+            [tuple(state[2 + 3 * j : 5 + 3 * j]) for j in range(wavelength_count)],
+        )
+        # the hero's mean direction serves the four wavelengths (``bsdfs.thin_film.film_at_directions``)
+        moved = (dr.square(light.means[0][0]) + dr.square(light.means[0][1]) > 1e-12) & ~coating.transmitted
+        path_shear = (dr.dot(coating.separation, record.frame_x), dr.dot(coating.separation, record.frame_y))
+        beams = len(coating.terms)
+        params = self.kernels.params
+
+        def at_mean(*_: mi.Float) -> tuple[mi.Float, ...]:
+            spectra = VertexSpectra(params, coating.material, wavelengths, self.kernels.spectrum_offsets)
+            thickness = coating.thickness if self._film_thickness_textured() else None
+            terms, shears = film_at_directions(spectra, tuple(coating.normal), light.means, thickness)
+            return (*terms, *(component for shear in shears for component in shear))
+
+        def along_path(*_: mi.Float) -> tuple[mi.Float, ...]:
+            return (*coating.terms, *(path_shear * len(wavelengths)))
+
+        state = dr.if_stmt(tuple(along_path()), moved, at_mean, along_path, label="film_phase")
+        terms = list(state[:beams])
+        shears = [(state[beams + 2 * j], state[beams + 2 * j + 1]) for j in range(len(wavelengths))]
+        reflectance = visible_reflectance(
+            terms, shears, light.covariances, resolved, self.kernels.visibility, wavelengths
+        )
+        return reflectance / dr.maximum(terms[0], 1e-12)
 
     @dr.syntax
     def _start_or_carry(
@@ -644,15 +710,33 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             shear = film_shear(vertex.frame.n, -wo_world, thickness, film_ior, incident_ior, OPS)
             coating.separation = dr.select(is_film, mi.Vector3f(*shear), coating.separation)
             coating.material = dr.select(is_film, vertex.material, coating.material)
-            coating.position = dr.select(is_film, vertex.si.p, coating.position)
-            coating.normal = dr.select(is_film, vertex.frame.n, coating.normal)
+            normal = vertex.frame.n
+            coating.normal = dr.select(
+                is_film,
+                mi.Vector3f(
+                    dr.dot(normal, incoming_fx), dr.dot(normal, incoming_fy), -dr.dot(normal, wo_world)
+                ),
+                coating.normal,
+            )
+            # The acceptance (``bsdfs.thin_film.detected_light``): the lobe's centre is the mirror image of
+            # the direction the path arrived from; the specular part and transmission pass one direction.
+            towards_camera = vertex.si.to_world(vertex.si.wi)
+            mirror = 2.0 * dr.dot(towards_camera, normal) * normal - towards_camera
+            lobe = ~sampled.delta & ~sampled.film.transmitted
+            centre = dr.select(lobe, wo_world - mirror, 0.0)  # k_a − k, k = −wo
+            coating.acceptance_mean = dr.select(
+                is_film,
+                mi.Point2f(dr.dot(centre, incoming_fx), dr.dot(centre, incoming_fy)),
+                coating.acceptance_mean,
+            )
+            variance = self.kernels.lobe_variance(vertex.material, vertex.spectra.wavelengths)
+            coating.lobe_variance = dr.select(is_film, dr.select(lobe, variance, 0.0), coating.lobe_variance)
             if self._film_thickness_textured():
                 coating.thickness = dr.select(is_film, thickness, coating.thickness)
             coating.transmitted = dr.select(is_film, sampled.film.transmitted, coating.transmitted)
             coating.terms = dr.select(is_film, list(sampled.film.terms), list(coating.terms))
         # Through a perfect mirror / refraction the carried vectors follow the beam.
         through_specular = continue_path & (vertex.specular | film_passthrough) & record.pending
-        record.chain_specular = dr.select(new_record, False, record.chain_specular | through_specular)
         record.frame_x = dr.select(
             through_specular, _reflect_vector(record.frame_x, vertex.frame.n), record.frame_x
         )
@@ -849,7 +933,7 @@ class HGPathIntegrator(mi.SamplingIntegrator):
                     vertex,
                     emitter_row,
                     segment,
-                    ray.o,
+                    ray,
                     wavelengths,
                     path,
                     record,
@@ -896,6 +980,8 @@ class HGPathIntegrator(mi.SamplingIntegrator):
             nee_coherence, direct_sample = self._emitter_light(
                 needs_nee_coherence, em_record_nee, si.p, nee_geometry
             )
+            # Beyond the first non-specular vertex every direction of the source reaches the pixel.
+            nee_coherence.acceptance_unbounded = mi.Bool(first_vertex.seen)
             wo_em = frame.to_local(ds_em.d)
             # Coherence-sensitive terms use the direction to the emitter's centre (BRIEF): a grating's lobes
             # and a thin film's interference phase; the sampled point serves the radiometric terms only.

@@ -134,6 +134,7 @@ class Renderer:
         self.integrator = integrator_class(compiled.scene.film.integrator)(mi.Properties())
         self.integrator.max_depth = compiled.scene.film.max_depth
         self.integrator.attach(self._context())
+        self.lens = None if compiled.lens is None else compiled.lens.on_device(mi)
         # film.wavelength_sampling: uniform, or the scene's importance density (tabulated once here).
         self.wavelengths = WavelengthSampler(
             mi, compiled.bands, scene_density(compiled.scene, compiled.bands)
@@ -306,6 +307,7 @@ class Renderer:
             integrator.context.kernel_tables()
             + integrator.kernels.kernel_tables()
             + self.wavelengths.kernel_tables()
+            + ([] if self.lens is None else self.lens.kernel_tables())
         )
         settings = (
             type(integrator).__qualname__,
@@ -377,7 +379,11 @@ class Renderer:
         film_position = mi.Point2f(
             (pixel_x + sampler.next_1d()) / width, (pixel_y + sampler.next_1d()) / height
         )
-        ray, _ = self.sensor.sample_ray(0.0, sampler.next_1d(), film_position, sampler.next_2d())
+        wavelength_sample = sampler.next_1d()  # Mitsuba's argument; the wavelengths are drawn below
+        aperture_sample = sampler.next_2d()
+        ray, _ = self.sensor.sample_ray(0.0, wavelength_sample, film_position, aperture_sample)
+        if self.lens is not None:  # a thin lens on the pinhole sensor (``thin_lens``)
+            ray = self.lens.ray(mi, ray, aperture_sample)
         span = bands.wavelength_max_nm - bands.wavelength_min_nm
         # The hero set and each lane's weight (worker.render.wavelength_sampling): ρ_λ,j = (1/Λ)/p(λ_j).
         hero_set = self.wavelengths.sample(sampler.next_1d())

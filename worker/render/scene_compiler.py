@@ -34,6 +34,7 @@ from worker.render import materials as mat
 from worker.render.emitters import FAR_DISTANCE_M, EmitterGeometry, EmitterKind, EmitterTable
 from worker.render.spectral import SpectralTable, grid_wavelengths_nm
 from worker.render.textures import TextureTable, coefficient_table, decode_image, uv_affine
+from worker.render.thin_lens import ThinLens
 
 EMITTER_SPECTRUM_STEP_NM = 1.0
 SUN_DISTANCE_M = FAR_DISTANCE_M
@@ -67,6 +68,7 @@ class CompiledScene:
     texture_table: TextureTable | None = None
     #: the environment emitter's record index (None: no environment)
     environment_record: int | None = None
+    lens: ThinLens | None = None  # the camera's thin lens (None: a pinhole)
 
 
 def spectrum_on(spectrum: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
@@ -553,8 +555,20 @@ class SceneCompiler:
                     record.values[mat.TINT_ID] = spectral_table.add_constant(1.0)
         black_index = material_table.add(mat.MaterialRow(mat.MaterialKind.BLACK))
 
+        # A thin lens: hg_path's renderer puts ``thin_lens.ThinLens`` on the pinhole sensor (a frozen pass
+        # cannot record Mitsuba's ``thinlens``); the reference scene uses Mitsuba's own ``thinlens``.
+        lens = None
+        reference_sensor = sensor
+        if camera.aperture_radius_m > 0.0:
+            lens = self._thin_lens(camera, camera_to_world)
+            reference_sensor = {
+                **sensor,
+                "type": "thinlens",
+                "aperture_radius": lens.aperture_radius_m,
+                "focus_distance": lens.focus_distance_m,
+            }
         hg_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
-        reference_dict: dict[str, Any] = {"type": "scene", "sensor": sensor}
+        reference_dict: dict[str, Any] = {"type": "scene", "sensor": reference_sensor}
         shape_materials: dict[str, int] = {}
         for index, shape in enumerate(scene.shapes):
             key = f"shape_{index}"
@@ -604,6 +618,26 @@ class SceneCompiler:
             emitter_records,
             texture_table=self._textures if len(self._textures) else None,
             environment_record=environment_record,
+            lens=lens,
+        )
+
+    def _thin_lens(self, camera: model.PerspectiveCamera, camera_to_world: Any) -> ThinLens:
+        """The camera's thin lens in world space (``thin_lens``: Mitsuba's camera frame, +x left)."""
+        mi = self.mi
+
+        def axis(local: tuple[float, float, float]) -> tuple[float, float, float]:
+            vector = np.asarray(camera_to_world @ mi.ScalarVector3f(*local), dtype=float)
+            return tuple((vector / np.linalg.norm(vector)).tolist())
+
+        return ThinLens(
+            aperture_radius_m=camera.aperture_radius_m,
+            focus_distance_m=camera.focus_distance(),
+            near_clip_m=camera.near_clip_m,
+            far_clip_m=camera.far_clip_m,
+            centre=tuple(np.asarray(camera_to_world @ mi.ScalarPoint3f(0.0, 0.0, 0.0), dtype=float).tolist()),
+            axis_x=axis((1.0, 0.0, 0.0)),
+            axis_y=axis((0.0, 1.0, 0.0)),
+            axis_z=axis((0.0, 0.0, 1.0)),
         )
 
     def _inline_mesh_with_bsdf(self, shape: Any, bsdf: dict, key: str, uv_set: str) -> Any:

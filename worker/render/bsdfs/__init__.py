@@ -16,7 +16,6 @@ from worker.render.bsdfs.common import (
     VisibilityModel,
 )
 from worker.render.bsdfs.dispatch import MaterialKernels
-from worker.render.bsdfs.thin_film import film_reflectance
 
 __all__ = [
     "IncidentCoherence",
@@ -25,5 +24,4 @@ __all__ = [
     "MaterialSample",
     "VertexSpectra",
     "VisibilityModel",
-    "film_reflectance",
 ]

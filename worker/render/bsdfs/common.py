@@ -53,6 +53,10 @@ class IncidentCoherence:
     # Per-lane ĉ_nm where rect_source (cylinders: by their view, ``emitters.CylinderModes``); None: the
     # universal rectangle's.
     rect_modes: dict[tuple[int, int], mi.Float] | None = None
+    # The vertex is seen through a non-specular vertex (the path passed one since the camera): every
+    # direction of the source reaches the pixel, whatever the vertex's own acceptance (``hgcore.optics.
+    # acceptance``: K = I, the paper's Eq. 18).
+    acceptance_unbounded: mi.Bool | bool = False
 
 
 @dataclass(frozen=True)
@@ -77,17 +81,30 @@ class VisibilityModel:
         sigma = (coherence.sigma_xx, coherence.sigma_xy, coherence.sigma_yy)
         result = mi.Spectrum(0.0)
         distance = dr.maximum(coherence.distance_m, 1e-9)
-        # With one mode both expansions are the same Gaussian: evaluate the rectangle's only when it differs.
-        needs_rect = self.rect_coefficients != self.disk_coefficients and self.rect_sources
-        rect_coefficients = self.rect_coefficients if coherence.rect_modes is None else coherence.rect_modes
         for j in range(len(wavelengths)):
-            wavelength_m = wavelengths[j] * 1e-9
-            mu = degree_of_coherence(xi, sigma, distance, wavelength_m, self.disk_coefficients, OPS)
-            if needs_rect:
-                mu_rect = degree_of_coherence(xi, sigma, distance, wavelength_m, rect_coefficients, OPS)
-                mu = dr.select(coherence.rect_source, mu_rect, mu)
-            result[j] = mu
+            result[j] = self.degree(coherence, xi, sigma, distance, wavelengths[j] * 1e-9)
         return result
+
+    def degree(
+        self,
+        coherence: IncidentCoherence,
+        xi: tuple[mi.Float, mi.Float],
+        sigma: tuple[mi.Float, mi.Float, mi.Float],
+        distance_m: mi.Float | float,
+        wavelength_m: mi.Float,
+    ) -> mi.Float:
+        """μ(ξ) at one wavelength for the transverse covariance ``sigma`` (m²) after ``distance_m``, with the
+        modes of the source ``coherence`` describes (its disk or rectangle expansion). With Σ = r²C and
+        r = 1 this is the angular form: C in rad² (``hgcore.optics.acceptance``)."""
+        mu = degree_of_coherence(xi, sigma, distance_m, wavelength_m, self.disk_coefficients, OPS)
+        # With one mode both expansions are the same Gaussian: evaluate the rectangle's only when it differs.
+        if self.rect_coefficients != self.disk_coefficients and self.rect_sources:
+            rect_coefficients = (
+                self.rect_coefficients if coherence.rect_modes is None else coherence.rect_modes
+            )
+            mu_rect = degree_of_coherence(xi, sigma, distance_m, wavelength_m, rect_coefficients, OPS)
+            mu = dr.select(coherence.rect_source, mu_rect, mu)
+        return mu
 
 
 class FilmSample(NamedTuple):

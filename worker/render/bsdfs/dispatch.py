@@ -168,6 +168,15 @@ class MaterialKernels:
         ``thickness_m``: its local τ where it differs from the material's (a texture)."""
         return film_terms(VertexSpectra(self.params, material, wavelengths), cos_i, thickness_m)
 
+    def lobe_variance(self, material: mi.UInt32, wavelengths: mi.Spectrum) -> mi.Spectrum:
+        """The per-axis variance (rad²) of the directions a thin film's rough lobe accepts
+        (``ThinFilm.lobe_variance``) in the lanes of each film, 0 elsewhere."""
+        result = mi.Spectrum(0.0)
+        for branch in self.branches:
+            if isinstance(branch, ThinFilm):
+                result = dr.select(material == branch.index, branch.lobe_variance(wavelengths), result)
+        return result
+
     # ---------------------------------------------------------------- evaluation and sampling
     def eval_pdf(
         self,

@@ -7,17 +7,35 @@ plane of incidence, docs/physics_interactions.md §3) (``VisibilityModel``). Sam
 R_incoherent and returns the terms (``FilmSample``); the integrator rescales the throughput by
 R(V)/R_incoherent once the path has reached the light's source and its coherence is known.
 
-The interference phase is taken along ``wo_phase``: towards the emitter's centre for light from an emitter
-(BRIEF: sampled emitter points serve radiometry only), else the sampled direction. On a dielectric
-substrate the film also transmits T(V) = 1 − R(V), specularly, into and out of the substrate (clear films
-only: the schema accepts an absorbing film, index n_f + iκ_f, on conductors alone).
+What a pixel sees (docs/physics_interactions.md §3, "What a pixel sees"). The film evaluates every plane wave
+of an incoherent source coherently at its own incidence, so the light a pixel collects carries the film's
+interference term averaged over the source directions that the film passes towards the pixel: the source's
+angular distribution times the film's *acceptance* (``hgcore.optics.acceptance``). The specular part passes
+one direction (the path's own: V = 1, its own phase); the lobe passes its width around the mirror
+direction; a film seen through a non-specular vertex passes the whole source (the paper's Eq. 18).
+``detected_light`` combines the two (per wavelength: the lobe's width ∝ λ), ``film_at_directions`` takes
+the film's terms and shear at the detected mean direction m (the interference phase of the light that
+reaches the pixel), ``visible_reflectance`` applies the visibilities with the detected spread C. Next-event
+estimation (``ThinFilm.eval_pdf``) and the integrator's pending record (``integrator._film_factor``) share
+them. On a dielectric substrate the film also transmits T(V) = 1 − R(V), specularly, into and out of the
+substrate (clear films only: the schema accepts an absorbing film, index n_f + iκ_f, on conductors alone).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import drjit as dr
 import mitsuba as mi
 
+from hgcore.optics.acceptance import (
+    ELLIPSE_OFFSET_SCALE,
+    PARALLELOGRAM_OFFSET_SCALE,
+    flat_top_axes,
+    flat_top_product_components,
+    lobe_acceptance_variance,
+    lobe_covariance_components,
+)
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_dielectric
 from hgcore.optics.thin_film import (
@@ -41,13 +59,14 @@ from worker.render.bsdfs.rough_conductor import RoughConductor
 
 
 def film_terms(
-    spectra: VertexSpectra, cos_i: mi.Float, thickness_m: mi.Float | None = None
+    spectra: VertexSpectra, cos_i: mi.Float | list[mi.Float], thickness_m: mi.Float | None = None
 ) -> list[mi.Spectrum]:
     """[R_incoherent, X_1 … X_{P−1}] per wavelength (``film_reflectance``) at incidence cos_i of the film
-    whose spectra are ``spectra``, with every beam (``hgcore.optics.thin_film.film_reflectance_terms``). The
-    film's index is n_f + iκ_f where a film of the scene absorbs (``MaterialParams.film_absorbing``), else
-    the real n_f as before. ``thickness_m``: the film's local thickness τ (default: the vertex's, from its
-    texture where it has one)."""
+    whose spectra are ``spectra``, with every beam (``hgcore.optics.thin_film.film_reflectance_terms``);
+    ``cos_i`` is one cosine for all wavelengths or one per wavelength. The film's index is n_f + iκ_f where
+    a film of the scene absorbs (``MaterialParams.film_absorbing``), else the real n_f as before.
+    ``thickness_m``: the film's local thickness τ (default: the vertex's, from its texture where it has
+    one)."""
     params, material, wavelengths = spectra.params, spectra.material, spectra.wavelengths
     exterior = params.param(material, mat.EXTERIOR_IOR)
     if thickness_m is None:
@@ -60,7 +79,7 @@ def film_terms(
     for j in range(len(wavelengths)):
         # every beam, the separations d ≥ P − 1 together (hgcore.optics.thin_film: "All beams")
         per_wavelength = film_reflectance_terms(
-            cos_i,
+            cos_i[j] if isinstance(cos_i, list) else cos_i,
             wavelengths[j] * 1e-9,
             thickness_m,
             film_n[j] if film_kappa is None else ComplexPair(film_n[j], film_kappa),
@@ -74,19 +93,118 @@ def film_terms(
     return terms
 
 
-def film_reflectance(
+class DetectedLight(NamedTuple):
+    """The part of a source that an interaction passes towards the pixel, per wavelength: the mean
+    direction offset m_j (rad) and the covariance C_j (rad²) of the arrival directions, in a transverse
+    basis (x, y, k) of a reference direction k of the incident light (``hgcore.optics.acceptance``)."""
+
+    means: list[tuple[mi.Float, mi.Float]]
+    covariances: list[tuple[mi.Float, mi.Float, mi.Float]]
+
+
+def detected_light(
+    normal: tuple[mi.Float, mi.Float, mi.Float],
+    source_mean: tuple[mi.Float, mi.Float],
+    source_cov: tuple[mi.Float, mi.Float, mi.Float],
+    acceptance_mean: tuple[mi.Float, mi.Float],
+    lobe_variance: mi.Spectrum,
+    unbounded: mi.Bool | bool,
+    rect_source: mi.Bool | bool,
+    wavelengths: mi.Spectrum,
+) -> DetectedLight:
+    """The source (mean offset, covariance C_s = Σ⊥/r², a uniform ellipse or, where ``rect_source``, a
+    uniform parallelogram) times the film's acceptance: its lobe, of per-axis variance v_j (rad², in
+    direction cosines) stretched to v_j (I + n⊥n⊥ᵀ/n_z²) in the transverse plane, around
+    ``acceptance_mean`` (v = 0: the specular part, a single direction), or every direction where
+    ``unbounded`` (``hgcore.optics.acceptance.flat_top_product_components``). ``normal``: the film
+    normal's components (n·x, n·y, n·k)."""
+    offset_scale = dr.select(rect_source, PARALLELOGRAM_OFFSET_SCALE, ELLIPSE_OFFSET_SCALE)
+    shape = lobe_covariance_components(1.0, normal, OPS)  # the lobe's, at every wavelength (a scale)
+    # The axes of the combination: the source's for an anisotropic source (a tube: the product lies along
+    # it), the lobe's for a round one; a scale of the lobe leaves them, so they serve every wavelength.
+    axes = flat_top_axes(source_cov, shape, OPS)
+    # The combination at the hero wavelength (diagonal on these axes unless ``unbounded``). The others'
+    # lobes differ in width only (∝ λ): their spreads follow from the hero's per axis as Gaussians combine,
+    # 1/c_j = 1/c_0 − 1/a_0 + 1/a_j (a the lobe's variance on the axis, c the combined) — exact where the
+    # lobe is much narrower or much wider than the source, a quarter of the truncations.
+    hero_lobe = tuple(lobe_variance[0] * component for component in shape)
+    mean, hero_cov = flat_top_product_components(
+        source_mean, source_cov, acceptance_mean, hero_lobe, unbounded, offset_scale, OPS, axes
+    )
+    means, covariances = [mean], [hero_cov]
+    (e1x, e1y), (e2x, e2y) = axes
+    per_axis = []
+    for ex, ey in axes:
+        lobe_axis = ex * ex * shape[0] + 2.0 * ex * ey * shape[1] + ey * ey * shape[2]
+        combined = ex * ex * hero_cov[0] + 2.0 * ex * ey * hero_cov[1] + ey * ey * hero_cov[2]
+        source_axis = ex * ex * source_cov[0] + 2.0 * ex * ey * source_cov[1] + ey * ey * source_cov[2]
+        per_axis.append((lobe_axis, combined, dr.maximum(source_axis, 0.0)))
+    for j in range(1, len(wavelengths)):
+        variances = []
+        for lobe_axis, combined, source_axis in per_axis:
+            hero_a, other_a = lobe_variance[0] * lobe_axis, lobe_variance[j] * lobe_axis
+            information = dr.rcp(dr.maximum(combined, 1e-30)) - dr.rcp(dr.maximum(hero_a, 1e-30))
+            information = dr.maximum(information, 0.0) + dr.rcp(dr.maximum(other_a, 1e-30))
+            variance = dr.minimum(dr.rcp(information), source_axis)
+            variances.append(dr.select((combined > 0.0) & (other_a > 0.0), variance, combined))
+        c1, c2 = variances
+        covariance = (
+            c1 * e1x * e1x + c2 * e2x * e2x,
+            c1 * e1x * e1y + c2 * e2x * e2y,
+            c1 * e1y * e1y + c2 * e2y * e2y,
+        )
+        if unbounded is not False:  # every direction of the source reaches the pixel: its own spread
+            covariance = tuple(
+                dr.select(unbounded, s, c) for s, c in zip(source_cov, covariance, strict=True)
+            )
+        means.append(mean)
+        covariances.append(covariance)
+    return DetectedLight(means, covariances)
+
+
+def film_at_directions(
+    spectra: VertexSpectra,
+    normal: tuple[mi.Float, mi.Float, mi.Float],
+    means: list[tuple[mi.Float, mi.Float]],
+    thickness_m: mi.Float | None = None,
+) -> tuple[list[mi.Spectrum], list[tuple[mi.Float, mi.Float]]]:
+    """The film's reflectance terms and its transverse shear ξ (m) for light arriving from the exterior
+    along the detected mean direction (k ∝ (m, 1) in the basis of ``normal``), so that the interference
+    phase and the visibility's argument belong to the light that reaches the pixel. The hero wavelength's
+    m (and its n_f for the shear) serves all four: the means differ only through the lobe's width ∝ λ,
+    where lobe and source are of a size, by a fraction of that width; one direction keeps the incidence
+    shared by the four wavelengths' terms (the kernels compute what depends on it once). ``thickness_m``:
+    the film's local thickness τ (default: the vertex's, from its texture where it has one)."""
+    params, material = spectra.params, spectra.material
+    exterior = params.param(material, mat.EXTERIOR_IOR)
+    if thickness_m is None:
+        thickness_m = spectra.param(mat.FILM_THICKNESS_M)
+    film_n = spectra[mat.FILM_IOR_ID]
+    mean_x, mean_y = means[0]
+    inverse_norm = dr.rsqrt(1.0 + mean_x * mean_x + mean_y * mean_y)
+    direction = (mean_x * inverse_norm, mean_y * inverse_norm, inverse_norm)
+    cosine = -(direction[0] * normal[0] + direction[1] * normal[1] + direction[2] * normal[2])
+    shear = film_shear(normal, direction, thickness_m, film_n[0], exterior, OPS)  # the hero's n_f, as ever
+    return film_terms(spectra, cosine, thickness_m), [(shear[0], shear[1])] * len(means)
+
+
+def visible_reflectance(
     terms: list[mi.Spectrum],
-    visibility: VisibilityModel,
+    shears: list[tuple[mi.Float, mi.Float]],
+    covariances: list[tuple[mi.Float, mi.Float, mi.Float]],
     coherence: IncidentCoherence,
-    separation_world: mi.Vector3f,
+    visibility: VisibilityModel,
     wavelengths: mi.Spectrum,
 ) -> mi.Spectrum:
-    """R(V) ∈ [0, 1] of the partially coherent sum of every beam, V_d = μ(d·``separation_world``) of the light
-    described by ``coherence``; ``separation_world`` is the film shear s (m) between successive beams."""
-    visibilities = [
-        visibility.at(coherence, separation_world * separation, wavelengths)
-        for separation in range(1, len(terms))
-    ]
+    """R(V) ∈ [0, 1] with V_d = μ(d·ξ_j) of the detected spread C_j (rad², the angular form: Σ = r²C at
+    r = 1) and the source's modes (``VisibilityModel.degree``)."""
+    visibilities = []
+    for separation in range(1, len(terms)):
+        values = mi.Spectrum(0.0)
+        for j in range(len(wavelengths)):
+            xi = (separation * shears[j][0], separation * shears[j][1])
+            values[j] = visibility.degree(coherence, xi, covariances[j], 1.0, wavelengths[j] * 1e-9)
+        visibilities.append(values)
     return bounded_reflectance(terms, visibilities, OPS)
 
 
@@ -116,20 +234,46 @@ class ThinFilm(RoughConductor):
     def eval_pdf(
         self, point: ShadingPoint, wo: mi.Vector3f, coherence: IncidentCoherence, wo_phase: mi.Vector3f
     ) -> tuple[mi.Spectrum, mi.Spectrum]:
-        terms = film_terms(point.spectra, wo_phase.z)
-        # Direct light reaches the film from the exterior side (``eval_domain``): the shear of light
-        # arriving along −wo_phase with the exterior's index (``hgcore.optics.thin_film.film_shear``).
-        thickness_m = point.spectra.param(mat.FILM_THICKNESS_M)
-        film_ior = point.spectra[mat.FILM_IOR_ID][0]
-        exterior = self.params.param(point.material, mat.EXTERIOR_IOR)
-        light_world = point.frame.to_world(wo_phase)
-        separation = mi.Vector3f(
-            *film_shear(point.frame.n, -light_world, thickness_m, film_ior, exterior, OPS)
+        """The lobe lit from the exterior (``eval_domain``) by light whose phase reference is ``wo_phase``
+        (an emitter's centre; ``coherence``: its Σ⊥ in a frame ⟂ that direction): the film's reflectance
+        of the source directions its lobe passes towards ``wi`` (module docstring)."""
+        frame, wi = point.frame, point.wi
+        reference = -frame.to_world(wo_phase)  # the light's propagation direction k
+        basis_x, basis_y = coherence.frame_x, coherence.frame_y
+        normal = (dr.dot(frame.n, basis_x), dr.dot(frame.n, basis_y), dr.dot(frame.n, reference))
+        inverse_r2 = dr.rcp(dr.square(dr.maximum(coherence.distance_m, 1e-9)))
+        source_cov = (
+            coherence.sigma_xx * inverse_r2,
+            coherence.sigma_xy * inverse_r2,
+            coherence.sigma_yy * inverse_r2,
         )
-        reflectance = film_reflectance(
-            terms, self.params.visibility, coherence, separation, point.wavelengths
+        # The lobe is centred on the mirror direction of wi: its offset from the reference, k_a − k.
+        lobe_centre = -frame.to_world(mi.Vector3f(-wi.x, -wi.y, wi.z)) - reference
+        acceptance_mean = (dr.dot(lobe_centre, basis_x), dr.dot(lobe_centre, basis_y))
+        light = detected_light(
+            normal,
+            (mi.Float(0.0), mi.Float(0.0)),
+            source_cov,
+            acceptance_mean,
+            self.lobe_variance(point.wavelengths),
+            coherence.acceptance_unbounded,
+            coherence.rect_source,
+            point.wavelengths,
+        )
+        terms, shears = film_at_directions(point.spectra, normal, light.means)
+        reflectance = visible_reflectance(
+            terms, shears, light.covariances, coherence, self.params.visibility, point.wavelengths
         )
         return self.lobe_eval(point, wo, reflectance)
+
+    def lobe_variance(self, wavelengths: mi.Spectrum) -> mi.Spectrum:
+        """The per-axis variance (rad²) of the directions the film's rough lobe accepts, per wavelength
+        (``hgcore.optics.acceptance.lobe_acceptance_variance``)."""
+        exterior = self.record.values.get(mat.EXTERIOR_IOR, 1.0)
+        result = mi.Spectrum(0.0)
+        for j in range(len(wavelengths)):
+            result[j] = lobe_acceptance_variance(self.model, exterior, wavelengths[j] * 1e-9, OPS)
+        return result
 
     def _sample_on_dielectric(
         self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f
