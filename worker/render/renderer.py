@@ -55,6 +55,8 @@ stores and reduces 1/16 of the per-sample outputs (60 float32 columns: 18 of the
 Cornell box went to storing and block-summing them per sample); a pixel's 16-lane packets still trace
 that pixel's samples (its camera rays stay coherent), which a loop over all of a pixel's samples in one
 lane would give up (+3 % megakernel time, measured)."""
+MIN_WAVEFRONT_LANES = 2
+"""Fewest lanes a pass launches (``_pass_columns``): Dr.Jit treats size-1 arrays like literals."""
 FROZEN_PASS_SHAPES = 4
 """Recordings a renderer keeps (least recently used dropped): a render has at most two tile heights and
 two pass sizes (the full one and the remainder)."""
@@ -330,20 +332,28 @@ class Renderer:
         lane_samples = samples_per_lane(spp)
         lanes_per_pixel = spp // lane_samples
         wavefront = width * rows * lanes_per_pixel
-        index = dr.arange(mi.UInt32, wavefront)
+        # A wavefront of one lane would make every array of the pass a size-1 array, which Dr.Jit treats
+        # like a literal inside its symbolic loops (and then refuses the loop state that changes): pad it
+        # to two lanes and drop the extra one below.
+        lanes = max(wavefront, MIN_WAVEFRONT_LANES)
+        index = dr.arange(mi.UInt32, lanes)
         # The pass's spp and the image size stay literals: divisions by them compile to multiply-shift
         # sequences, while opaque divisors made the megakernel ~5 % slower (bench_compare, Cornell 128²);
         # a new spp per pass compiles once (~0.3 s).
         slot_pixel = index // lanes_per_pixel
         row = (slot_pixel // width) * row_stride(rows) % rows
         sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(seed, wavefront)
+        sampler.seed(seed, lanes)
         pixel_x = mi.Float(slot_pixel % width)
         pixel_y = mi.Float(first_row + row)
         sums = self._lane_sums(sampler, pixel_x, pixel_y, lane_samples)
         # One launch of the path megakernel for every column (reducing them one by one would re-run the
         # whole path loop for each), then a block sum per column over the pixel's lanes.
         dr.eval(sums)
+        if lanes > wavefront:
+            kept = dr.arange(mi.UInt32, wavefront)
+            sums = [dr.gather(mi.Float, column, kept) for column in sums]
+            dr.eval(sums)
         if lanes_per_pixel > 1:
             sums = [dr.block_sum(column, lanes_per_pixel) for column in sums]
             dr.eval(sums)
