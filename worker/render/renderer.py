@@ -17,7 +17,9 @@ of Python per pass, 2 % of a 128² × 64 spp Cornell box's CPU time) and records
 later passes of the same shape (rows, spp) replay them with the new seed. A recording names what its
 kernels read: the scene, the seed and the tile's first row (opaque arguments), every table of the
 integrator, materials and wavelength sampler (``_pass_state``, each owner's ``kernel_tables``), and the
-Python settings the trace depends on (a change records again). Replays are bitwise the traced passes
+Python settings the trace depends on (``_trace_settings``: a change records again, in a frozen function of
+its own, since Dr.Jit's own comparison of those Python values missed a change of ``max_depth`` from 8 to 2
+with drjit 1.5). Replays are bitwise the traced passes
 (tests/integrator/test_frozen_passes.py); a scene whose kernels read an array no owner names cannot be
 recorded, and renders unfrozen (with a warning) rather than not at all.
 """
@@ -143,7 +145,8 @@ class Renderer:
         )
         #: whether passes replay recorded kernels (module docstring, "Frozen passes")
         self.frozen_passes = True
-        self._frozen_pass = dr.freeze(self._pass_columns, state_fn=self._pass_state, limit=FROZEN_PASS_SHAPES)
+        self._frozen_settings = self._trace_settings()
+        self._frozen_pass = self._new_frozen_pass()
 
     def _context(self) -> RenderContext:
         mi = self.mi
@@ -291,6 +294,9 @@ class Renderer:
         # the recording), so that every pass and tile compiled (and recorded) its own copy.
         arguments = (self.scene, dr.opaque(mi.UInt32, seed), dr.opaque(mi.UInt32, y0), y1 - y0, spp)
         if self.frozen_passes:
+            settings = self._trace_settings()
+            if settings != self._frozen_settings:
+                self._frozen_settings, self._frozen_pass = settings, self._new_frozen_pass()
             try:
                 with _collector_paused():
                     return self._frozen_pass(*arguments)
@@ -301,17 +307,14 @@ class Renderer:
                 self.frozen_passes = False
         return self._pass_columns(*arguments)
 
-    def _pass_state(self, *_: Any) -> tuple[list[Any], tuple[Any, ...]]:
-        """What a frozen pass reads besides its arguments: the arrays its kernels gather from, and the
-        Python settings its trace depends on (hashed: a change records the pass again)."""
+    def _new_frozen_pass(self) -> Any:
+        """A frozen ``_pass_columns`` (module docstring, "Frozen passes") for the current settings."""
+        return dr.freeze(self._pass_columns, state_fn=self._pass_state, limit=FROZEN_PASS_SHAPES)
+
+    def _trace_settings(self) -> tuple[Any, ...]:
+        """The Python settings a pass's trace depends on: a change needs a new recording."""
         integrator = self.integrator
-        tables = (
-            integrator.context.kernel_tables()
-            + integrator.kernels.kernel_tables()
-            + self.wavelengths.kernel_tables()
-            + ([] if self.lens is None else self.lens.kernel_tables())
-        )
-        settings = (
+        return (
             type(integrator).__qualname__,
             integrator.max_depth,
             integrator.rr_depth,
@@ -321,7 +324,18 @@ class Renderer:
             self.width,
             self.height,
         )
-        return tables, settings
+
+    def _pass_state(self, *_: Any) -> tuple[list[Any], tuple[Any, ...]]:
+        """What a frozen pass reads besides its arguments: the arrays its kernels gather from, and the
+        Python settings its trace depends on (also checked by ``_render_pass`` itself)."""
+        integrator = self.integrator
+        tables = (
+            integrator.context.kernel_tables()
+            + integrator.kernels.kernel_tables()
+            + self.wavelengths.kernel_tables()
+            + ([] if self.lens is None else self.lens.kernel_tables())
+        )
+        return tables, self._trace_settings()
 
     def _pass_columns(self, scene: Any, seed: Any, first_row: Any, rows: int, spp: int) -> list[Any]:
         """The kernels of one pass (``_render_pass``; ``scene`` is ``self.scene``, an argument so that a
