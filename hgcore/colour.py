@@ -83,6 +83,12 @@ def y_bar_integral_nm() -> float:
     return float(np.trapezoid(cie_cmf(grid_nm)[:, 1], grid_nm))
 
 
+def image_xyz_weights(edges_nm: np.ndarray) -> np.ndarray:
+    """XYZ per unit band radiance for bands between ``edges_nm``, shape (B, 3): ∫_band (x̄, ȳ, z̄) dλ / ∫ ȳ dλ,
+    the image's normalisation (a unit equal-energy spectrum has Y = 1, Mitsuba's film convention)."""
+    return band_edges_xyz_weights(edges_nm) / y_bar_integral_nm()
+
+
 def bands_to_xyz(band_values: np.ndarray, band_centers_nm: np.ndarray) -> np.ndarray:
     """CIE XYZ of band radiances ``band_values`` (..., B) with band centres in nm; shape (..., 3)."""
     return np.asarray(band_values, dtype=float) @ band_xyz_weights(band_centers_nm)

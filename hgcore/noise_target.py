@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from hgcore.artifacts.pixel_sums import PixelSums
+from hgcore.artifacts.pixel_sums import PixelSums, variance_of_mean
 from hgcore.errors import InputError
 
 MIN_ROUND_FRACTION = 1 / 16
@@ -105,7 +105,9 @@ class ImageErrors:
         for band in range(band_count):
             mean = sums.bands[..., band] / count
             band_mean[band] = mean.sum()
-            band_variance[band] = (np.maximum(sums.bands_sq[..., band] / count - mean**2, 0.0) / count).sum()
+            band_variance[band] = variance_of_mean(
+                sums.bands[..., band], sums.bands_sq[..., band], sums.sample_count
+            ).sum()
         if self.band_mean_sum is None or self.band_variance_sum is None:
             self.band_mean_sum, self.band_variance_sum = band_mean, band_variance
         else:
@@ -115,7 +117,9 @@ class ImageErrors:
             )
         self.pixels += sums.bands.shape[0] * sums.bands.shape[1]
         luminance = sums.values["luminance"] / count
-        luminance_variance = np.maximum(sums.values["luminance_sq"] / count - luminance**2, 0.0) / count
+        luminance_variance = variance_of_mean(
+            sums.values["luminance"], sums.values["luminance_sq"], sums.sample_count
+        )
         lit = luminance > 0
         self._luminance_errors.append(np.sqrt(luminance_variance[lit]) / luminance[lit])
 

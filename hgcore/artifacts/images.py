@@ -5,8 +5,10 @@
 ``emissiveUnits`` = ``W.m^-2.sr^-1``; ``R``, ``G``, ``B`` linear sRGB (CIE 1931 2°, D65 white, XYZ from
 the bands, normalised so that a unit equal-energy spectrum has Y = 1); the BRIEF's ``coherence.*``
 diagnostics; ``depth`` (m), ``normal.X/Y/Z`` (world) and ``albedo.R/G/B`` of the first hit.
-``variance.exr`` holds the variance of each band's pixel mean (σ²/N, from the per-sample second moments)
-for noise-aware regression tests. Writes are atomic. Names and channels: ``hgcore.artifacts.layout``.
+``variance.exr`` holds the variance of each band's pixel mean (σ̂²/N, from the per-sample second moments
+with the 1/N sample variance) and ``Y``, that of the pixel's luminance in image.exr's units (the
+per-sample Y of the band values with the same weights), for noise-aware regression tests and error bars.
+Writes are atomic. Names and channels: ``hgcore.artifacts.layout``.
 """
 
 from __future__ import annotations
@@ -37,8 +39,8 @@ from hgcore.artifacts.layout import (
     BandLayout,
     coherence_channel,
 )
-from hgcore.artifacts.pixel_sums import PixelSums
-from hgcore.colour import band_edges_xyz_weights, xyz_to_linear_srgb, y_bar_integral_nm
+from hgcore.artifacts.pixel_sums import PixelSums, variance_of_mean
+from hgcore.colour import image_xyz_weights, xyz_to_linear_srgb
 from hgcore.files import atomic_write_bytes
 from hgcore.imaging import display_rgb8, preview_exposure_ev
 from hgcore.optics.coherence import diagnostics_components, principal_axes_components
@@ -117,9 +119,8 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
     """Per-pixel means and diagnostics (float32 arrays of shape (H, W) or (H, W, B))."""
     count = float(sums.sample_count)
     band_mean = sums.bands / count
-    band_variance = np.maximum(sums.bands_sq / count - band_mean**2, 0.0) / count
-    # Normalised so that a unit equal-energy spectrum has Y = 1 (Mitsuba's film convention).
-    xyz = band_mean @ band_edges_xyz_weights(bands.edges_nm) / y_bar_integral_nm()
+    band_variance = variance_of_mean(sums.bands, sums.bands_sq, sums.sample_count)
+    xyz = band_mean @ image_xyz_weights(bands.edges_nm)
     rgb = xyz_to_linear_srgb(xyz)
     values = sums.values
     secondary = secondary_source_m(values)
@@ -161,8 +162,8 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
         "depth": (values["depth"] / count).astype(np.float32),
         "normal": (np.stack([values[f"normal_{c}"] for c in "xyz"], axis=-1) / count).astype(np.float32),
         "albedo": xyz_to_linear_srgb(albedo_xyz).astype(np.float32),
-        "luminance_variance": (
-            np.maximum(values["luminance_sq"] / count - (values["luminance"] / count) ** 2, 0.0) / count
+        "luminance_variance": variance_of_mean(
+            values["luminance"], values["luminance_sq"], sums.sample_count
         ).astype(np.float32),
         **{coherence_channel(key): value.astype(np.float32) for key, value in coherence.items()},
         COHERENCE_WEIGHT: (weight / count).astype(np.float32),

@@ -136,6 +136,14 @@ class PixelSums:
         )
 
 
+def variance_of_mean(total: np.ndarray, total_sq: np.ndarray, count: int) -> np.ndarray:
+    """σ̂²/N, the variance of the mean of ``count`` samples from their sum and sum of squares with the 1/N
+    sample variance σ̂² = Σx²/N − x̄² (variance.exr's definition; readers that need it unbiased scale by
+    N/(N−1), ``hgcore.regression.images``)."""
+    mean = total / count
+    return np.maximum(total_sq / count - mean * mean, 0.0) / count
+
+
 def column_count(band_count: int) -> int:
     """Columns of a partial's table: bands, bands² and ``SUM_KEYS``."""
     return 2 * band_count + len(SUM_KEYS)

@@ -106,3 +106,40 @@ def test_exr_channels_and_attributes_follow_the_contract(scene: dict, tmp_path: 
     assert stored["spp"] == summary["spp"] == 4
     assert (tmp_path / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list(tmp_path.glob(".*tmp"))  # atomic writes leave no temporaries
+
+
+# A 1 m square light beside the view, facing the plane: every pixel's samples vary alike (where the direct
+# view of a small light gives a few pixels all the variance, too heavy-tailed for a few seeds).
+SIDE_LIGHT = {
+    "type": "rectangle",
+    "center_m": [1.5, 0.0, 1.0],
+    "normal": [-0.83205, 0.0, -0.5547],
+    "up": [0.0, 1.0, 0.0],
+    "width_m": 1.0,
+    "height_m": 1.0,
+    "spectrum": {"type": "blackbody", "temperature_k": 4000.0},
+    "power_w": 50.0,
+}
+
+
+def test_variance_exr_luminance_is_the_variance_of_image_exr_luminance(tmp_path: Path) -> None:
+    """variance.exr's Y is the variance of the pixel mean of image.exr's luminance, in its units: over
+    independent renders (seeds) the scatter s² of each pixel's Y (Rec. 709 weights of image.exr's linear
+    sRGB) has the mean v̄ that variance.exr reports, times N/(N−1) (its σ̂² is the 1/N sample variance,
+    docs/regression.md). The ratio R = Σs²/Σv̄ over the P independent pixels is
+    1 within 4 standard errors, SE = std(s² − R v̄)/(√P mean v̄) (delta method; measured 1.04 ± 0.04).
+    Issue 26: Y was 106.857² × too large (∫ȳ dλ missing), R ≈ 1e-4."""
+    scene = plane_under_source(SIDE_LIGHT, size_px=16, spp=8)
+    luminances, reported = [], []
+    for seed in range(1, 9):
+        render_scene(validate_scene(scene), tmp_path / str(seed), seed=seed)
+        image = read_exr(tmp_path / str(seed) / "image.exr").channels
+        luminances.append(0.2126 * image["R"] + 0.7152 * image["G"] + 0.0722 * image["B"])
+        reported.append(read_exr(tmp_path / str(seed) / "variance.exr").channels["Y"])
+    scatter = np.var(np.asarray(luminances, dtype=float), axis=0, ddof=1).ravel()
+    spp = scene["film"]["spp"]
+    mean_reported = np.mean(np.asarray(reported, dtype=float), axis=0).ravel() * spp / (spp - 1)
+    ratio = scatter.sum() / mean_reported.sum()
+    error = np.std(scatter - ratio * mean_reported, ddof=1) / (np.sqrt(scatter.size) * mean_reported.mean())
+    assert abs(ratio - 1.0) <= 4.0 * error, (ratio, error)
+    assert error < 0.07, error  # the check has power: a scale error of 30 % fails it

@@ -37,6 +37,7 @@ import drjit as dr
 import numpy as np
 
 from hgcore.artifacts.pixel_sums import SUM_KEYS, PixelSums, column_count
+from hgcore.colour import image_xyz_weights
 from hgcore.optics.sources import source_coefficients
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.bsdfs import MaterialKernels
@@ -143,6 +144,9 @@ class Renderer:
         self.wavelengths = WavelengthSampler(
             mi, compiled.bands, scene_density(compiled.scene, compiled.bands)
         )
+        # Y of a sample from its band values with the weights image.exr's Y has of the band means, so that
+        # the per-sample luminance sums give variance.exr's Y in image.exr's units.
+        self._band_luminance = image_xyz_weights(compiled.bands.edges_nm)[:, 1].tolist()
         #: whether passes replay recorded kernels (module docstring, "Frozen passes")
         self.frozen_passes = True
         self._frozen_settings = self._trace_settings()
@@ -427,13 +431,14 @@ class Renderer:
             for j in range(lane_count):
                 value += dr.select(hero_set.band_of_lane[j] == band, radiance[j], 0.0)
             band_values.append(value * band_scale)
-        xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
+        luminance = mi.Float(0.0)
+        for value, weight in zip(band_values, self._band_luminance, strict=True):
+            luminance += value * weight
         albedo_xyz = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
         cie = self.integrator.context.cie1931
         for j in range(lane_count):
             cmf = cie1931_xyz(mi, cie, wavelengths[j])
             for c in range(3):
-                xyz[c] += cmf[c] * result.radiance[j] * weights[j]
                 albedo_xyz[c] += cmf[c] * result.albedo[j] * weights[j] * mi.MI_CIE_Y_NORMALIZATION
         per_sample = {
             "diag_w": result.diag_weight,
@@ -456,8 +461,8 @@ class Renderer:
             "albedo_x": albedo_xyz[0],
             "albedo_y": albedo_xyz[1],
             "albedo_z": albedo_xyz[2],
-            "luminance": xyz[1],
-            "luminance_sq": dr.square(xyz[1]),
+            "luminance": luminance,
+            "luminance_sq": dr.square(luminance),
         }
         squares = [dr.square(value) for value in band_values]
         return band_values + squares + [per_sample[key] for key in SUM_KEYS]
