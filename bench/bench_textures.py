@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench.machine import MachineLoad, write_results
+from bench.machine import MachineLoad, paired_ratio, write_results
 from schemas import EXAMPLES_DIR
 from schemas.validation import validate_scene
 from worker.mitsuba_setup import configure_mitsuba, configured_mitsuba
@@ -126,32 +126,16 @@ def _renderer(scene: dict[str, Any], folder: Path) -> Renderer:
     return Renderer(SceneCompiler(configured_mitsuba(), folder).compile(validate_scene(scene)))
 
 
-def _timed(renderer: Renderer, seed: int) -> tuple[float, float]:
-    cpu, wall = time.process_time(), time.perf_counter()
-    renderer.render_sums(SPP, seed)  # host sums: the kernels have run
-    return time.process_time() - cpu, time.perf_counter() - wall
-
-
 def _pair(constant: Renderer, textured: Renderer) -> dict[str, Any]:
-    _timed(constant, 0), _timed(textured, 0)  # compile
-    ratios_cpu, ratios_wall, times = [], [], {"constant": [], "textured": []}
-    for round_index in range(ROUNDS):
-        order = ("constant", "textured") if round_index % 2 == 0 else ("textured", "constant")
-        measured = {}
-        for name in order:
-            measured[name] = _timed(constant if name == "constant" else textured, round_index + 1)
-            times[name].append(measured[name])
-        ratios_cpu.append(measured["textured"][0] / measured["constant"][0])
-        ratios_wall.append(measured["textured"][1] / measured["constant"][1])
-    return {
-        "constant_cpu_s": statistics.median(t[0] for t in times["constant"]),
-        "textured_cpu_s": statistics.median(t[0] for t in times["textured"]),
-        "paired_ratio_cpu": statistics.median(ratios_cpu),
-        "paired_ratio_wall": statistics.median(ratios_wall),
-        "ratios_cpu": ratios_cpu,
-        "goal": GOAL,
-        "met": statistics.median(ratios_cpu) <= GOAL,
-    }
+    """textured/constant over ``ROUNDS`` alternated rounds (``bench.machine.paired_ratio``)."""
+    pair = paired_ratio(
+        lambda seed: constant.render_sums(SPP, seed),  # host sums: the kernels have run
+        lambda seed: textured.render_sums(SPP, seed),
+        ROUNDS,
+        GOAL,
+    )
+    renamed = {"baseline_cpu_s": "constant_cpu_s", "candidate_cpu_s": "textured_cpu_s"}
+    return {renamed.get(key, key): value for key, value in pair.items()}
 
 
 def _mitsuba_pair(constant: dict[str, Any], textured: dict[str, Any], folder: Path) -> dict[str, Any]:

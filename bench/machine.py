@@ -11,7 +11,9 @@ from __future__ import annotations
 import json
 import os
 import platform
+import statistics
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -98,3 +100,38 @@ class MachineLoad:
             "cpu_reference_s": {"before": self.reference_before_s, "after": cpu_reference_s()},
             "loadavg": {"before": self.load_before, "after": os.getloadavg()},
         }
+
+
+def paired_ratio(
+    baseline: Callable[[int], None], candidate: Callable[[int], None], rounds: int, goal: float
+) -> dict[str, Any]:
+    """CPU and wall seconds of ``candidate(seed)`` over ``baseline(seed)``, alternated for ``rounds`` rounds
+    with the order reversed every round (A B B A …: drift on these VMs cancels), after one warm-up call each
+    (kernels compiled). ``paired_ratio_cpu`` is the median of the per-round ratios (CPU time: robust to the
+    machine's other users); ``met`` whether it is at most ``goal``."""
+
+    def timed(render: Callable[[int], None], seed: int) -> tuple[float, float]:
+        cpu, wall = time.process_time(), time.perf_counter()
+        render(seed)
+        return time.process_time() - cpu, time.perf_counter() - wall
+
+    timed(baseline, 0), timed(candidate, 0)
+    ratios_cpu, ratios_wall = [], []
+    times: dict[str, list[tuple[float, float]]] = {"baseline": [], "candidate": []}
+    for round_index in range(rounds):
+        order = ("baseline", "candidate") if round_index % 2 == 0 else ("candidate", "baseline")
+        measured = {}
+        for name in order:
+            measured[name] = timed(baseline if name == "baseline" else candidate, round_index + 1)
+            times[name].append(measured[name])
+        ratios_cpu.append(measured["candidate"][0] / measured["baseline"][0])
+        ratios_wall.append(measured["candidate"][1] / measured["baseline"][1])
+    return {
+        "baseline_cpu_s": statistics.median(t[0] for t in times["baseline"]),
+        "candidate_cpu_s": statistics.median(t[0] for t in times["candidate"]),
+        "paired_ratio_cpu": statistics.median(ratios_cpu),
+        "paired_ratio_wall": statistics.median(ratios_wall),
+        "ratios_cpu": ratios_cpu,
+        "goal": goal,
+        "met": statistics.median(ratios_cpu) <= goal,
+    }

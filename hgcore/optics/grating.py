@@ -27,10 +27,22 @@ the source grows: the dimmed secondary lobes of Fig. 1(f); under full coherence,
 intrinsic one). The literal product S(φ⊥)·Ψ̃(φ⊥) would instead attenuate lobes *more* under *more* coherence.
 The 0th order is a specular delta of efficiency η_00 that keeps the incident coherence (the caller's).
 
-With several incident modes (whitened coefficients ĉ_nm of ``hgcore.optics.coherence``) the lobe shape is the
-FT of the modal degree of coherence, (1/2π) Σ ĉ_nm (−1)^{(n+m)/2} h_n(v₁) h_m(v₂) per unit whitened area,
-with v the C_β-whitened offset β_o − β_pq (exact for one mode; with more modes the intrinsic broadening is
-folded into the whitening). Truncated expansions can dip below zero in the tails; the shape is clamped at 0.
+With several incident modes (whitened coefficients ĉ_nm of ``hgcore.optics.coherence``, ``film.modes``)
+the source's image is the FT of the modal degree of coherence,
+(1/2π|Σ'/s²|^{½}) Σ ĉ_nm (−1)^{(n+m)/2} h_n(x₁) h_m(x₂),
+with x the Σ'/s²-whitened offset in its principal frame (eigenvalues λ_i), and the lobe is that image
+convolved with the intrinsic Gaussian N(0, t I), t = (w/k)². The convolution is exact mode by mode: per axis,
+with q = λ + t, 1/σ = √(λ/q), ρ = t/q and y = β/√q (from the generating function of the Hermite
+polynomials, e^{2xu − u²} = Σ H_n(x) uⁿ/n!),
+
+    h_n(·/√λ) ⊛ N(0, t) = (1/σ) Σ_{j ≤ n/2} (1/σ)^{n−2j} ρ^j 2^{−j} √(n!/(n−2j)!)/j! · h_{n−2j}(y),
+
+so the lobe is (1/2π√(q₁q₂)) Σ_kl e_kl h_k(y₁) h_l(y₂) with blurred coefficients e_kl. One mode, ĉ_00 = √π,
+gives N(β_o; β_pq, C_β) exactly; a point source (λ → 0) gives μ(0)·N(0, tI). The only error is the
+truncation of the source's expansion (the 16-mode disk image: tests/optics/test_grating.py measures it
+against a direct quadrature of the uniform disk blurred by the intrinsic lobe). A truncated expansion can
+dip below zero in its tails; the lobe is clamped at 0, which adds up to 5 % to a lobe's energy (16 disk
+modes at the DVD's intrinsic width; tests).
 Formulas run element-wise against ``ops`` (NumPy and Dr.Jit).
 """
 
@@ -131,13 +143,18 @@ def lobe_centre(
     return centre_x, centre_y
 
 
+def intrinsic_variance(grating: BinaryGrating, wavelength_m: Any) -> Any:
+    """t = (w/k)²: the variance (per axis, in β², dimensionless) of the intrinsic lobe at ``wavelength_m``."""
+    intrinsic_per_m = grating.lobe_width_per_um / METRES_PER_MICRON
+    intrinsic_beta = intrinsic_per_m * wavelength_m / (2.0 * math.pi)
+    return intrinsic_beta * intrinsic_beta
+
+
 def lobe_covariance(
     grating: BinaryGrating, source_angular_cov: tuple[Any, Any, Any], wavelength_m: Any
 ) -> tuple[Any, Any, Any]:
     """C_β = Σ'/s² + (w/k)² I as entries (C_xx, C_xy, C_yy), dimensionless."""
-    intrinsic_per_m = grating.lobe_width_per_um / METRES_PER_MICRON
-    intrinsic_beta = intrinsic_per_m * wavelength_m / (2.0 * math.pi)
-    intrinsic_var = intrinsic_beta * intrinsic_beta
+    intrinsic_var = intrinsic_variance(grating, wavelength_m)
     cov_xx, cov_xy, cov_yy = source_angular_cov
     return cov_xx + intrinsic_var, cov_xy, cov_yy + intrinsic_var
 
@@ -150,30 +167,67 @@ def gaussian_density(dx: Any, dy: Any, covariance: tuple[Any, Any, Any], ops: Ar
     return ops.exp(-0.5 * quadratic) / (2.0 * math.pi * ops.sqrt(determinant))
 
 
-def modal_lobe_density(
-    dx: Any,
-    dy: Any,
-    covariance: tuple[Any, Any, Any],
-    coefficients: Mapping[tuple[int, int], float],
-    ops: ArrayOps,
-) -> Any:
-    """Multi-mode lobe density per unit d²β: (1/2π|C|^{½}) max(0, Σ ĉ_nm (−1)^{(n+m)/2} h_n(v₁) h_m(v₂)).
+def blurred_mode_factors(degree: int, inverse_sigma: Any, rho: Any) -> dict[tuple[int, int], Any]:
+    """(n, k) → (1/σ)^k ρ^j 2^{−j} √(n!/k!)/j!, k = n − 2j: h_n blurred by the intrinsic Gaussian along one
+    axis as a sum of h_k(y) (module docstring; the common factor 1/σ left out)."""
+    factors: dict[tuple[int, int], Any] = {}
+    for n in range(degree + 1):
+        for j in range(n // 2 + 1):
+            k = n - 2 * j
+            constant = math.sqrt(math.factorial(n) / math.factorial(k)) / (math.factorial(j) * 2.0**j)
+            factors[(n, k)] = constant * inverse_sigma**k * rho**j
+    return factors
 
-    v = C^{−½}(d) in C's principal frame (λ₁ ≥ λ₂ with unit eigenvector (cos φ, sin φ)). One coefficient
-    ĉ_00 = √π reproduces :func:`gaussian_density` exactly.
-    """
-    lambda_major, lambda_minor, cos_phi, sin_phi = principal_axes_components(*covariance, ops)
-    v_major = (cos_phi * dx + sin_phi * dy) / ops.sqrt(lambda_major)
-    v_minor = (cos_phi * dy - sin_phi * dx) / ops.sqrt(lambda_minor)
-    degree = max_degree(coefficients)
-    hermite_major = hermite_functions(v_major, degree, ops)
-    hermite_minor = hermite_functions(v_minor, degree, ops)
-    total: Any = 0.0
-    for (n, m), value in coefficients.items():
-        # FT of h_n is (−i)^n h_n; physical CSDs only carry even n + m, where (−i)^{n+m} = (−1)^{(n+m)/2}.
-        sign = -1.0 if ((n + m) // 2) % 2 else 1.0
-        total = total + (sign * value) * hermite_major[n] * hermite_minor[m]
-    return ops.maximum(total, 0.0) / (2.0 * math.pi * ops.sqrt(lambda_major * lambda_minor))
+
+class ModalLobe:
+    """The lobe shape of a multi-mode source per unit d²β, centred at 0: the source's modal image (Σ'/s²,
+    coefficients ĉ_nm) convolved with the intrinsic N(0, tI) (module docstring). Built once per wavelength;
+    ``density`` is evaluated per order."""
+
+    def __init__(
+        self,
+        source_angular_cov: tuple[Any, Any, Any],
+        intrinsic_var: Any,
+        coefficients: Mapping[tuple[int, int], Any],
+        ops: ArrayOps,
+    ) -> None:
+        self.ops = ops
+        lambda_major, lambda_minor, self.cos_phi, self.sin_phi = principal_axes_components(
+            *source_angular_cov, ops
+        )
+        # Σ' = 0 (plane waves) makes λ₂ = 0/0; a rank-one Σ' can round to det < 0: both are λ₂ = 0.
+        lambda_major = ops.maximum(lambda_major, 0.0)
+        lambda_minor = ops.where(lambda_major > 0.0, ops.maximum(lambda_minor, 0.0), 0.0)
+        q_major, q_minor = lambda_major + intrinsic_var, lambda_minor + intrinsic_var
+        self.inv_sqrt_q = (1.0 / ops.sqrt(q_major), 1.0 / ops.sqrt(q_minor))
+        self.scale = 1.0 / (2.0 * math.pi * ops.sqrt(q_major * q_minor))
+        self.degree = max_degree(coefficients)
+        major = blurred_mode_factors(self.degree, ops.sqrt(lambda_major / q_major), intrinsic_var / q_major)
+        minor = blurred_mode_factors(self.degree, ops.sqrt(lambda_minor / q_minor), intrinsic_var / q_minor)
+        # e_kl = Σ_nm ĉ_nm (−1)^{(n+m)/2} A_nk A_ml: the FT of h_n is (−i)^n h_n, and physical CSDs carry
+        # even n + m only, where (−i)^{n+m} = (−1)^{(n+m)/2}.
+        blurred: dict[tuple[int, int], Any] = {}
+        for (n, m), value in coefficients.items():
+            signed = -value if ((n + m) // 2) % 2 else value
+            for (n_major, k), factor_major in major.items():
+                if n_major != n:
+                    continue
+                for (m_minor, ell), factor_minor in minor.items():
+                    if m_minor == m:
+                        blurred[(k, ell)] = blurred.get((k, ell), 0.0) + signed * factor_major * factor_minor
+        self.blurred = blurred
+
+    def density(self, dx: Any, dy: Any) -> Any:
+        """The lobe at offset (dx, dy) from its centre, per unit d²β (≥ 0)."""
+        ops = self.ops
+        y_major = (self.cos_phi * dx + self.sin_phi * dy) * self.inv_sqrt_q[0]
+        y_minor = (self.cos_phi * dy - self.sin_phi * dx) * self.inv_sqrt_q[1]
+        hermite_major = hermite_functions(y_major, self.degree, ops)
+        hermite_minor = hermite_functions(y_minor, self.degree, ops)
+        total: Any = 0.0
+        for (k, ell), value in self.blurred.items():
+            total = total + value * hermite_major[k] * hermite_minor[ell]
+        return ops.maximum(total, 0.0) * self.scale
 
 
 def _propagating_lobes(
@@ -197,18 +251,21 @@ def _mixture_density(
     wavelength_m: Any,
     source_angular_cov: tuple[Any, Any, Any],
     ops: ArrayOps,
-    coefficients: Mapping[tuple[int, int], float] | None,
+    coefficients: Mapping[tuple[int, int], Any] | None,
 ) -> tuple[Any, Any]:
-    """(Σ η_pq N(β_o; β_pq, C_β), Σ η_pq) over propagating non-zero orders."""
+    """(Σ η_pq N(β_o; β_pq, C_β), Σ η_pq) over propagating non-zero orders; with ``coefficients`` (several
+    modes) each lobe is the ``ModalLobe`` instead of the Gaussian."""
     covariance = lobe_covariance(grating, source_angular_cov, wavelength_m)
+    modal = (
+        None
+        if coefficients is None
+        else ModalLobe(source_angular_cov, intrinsic_variance(grating, wavelength_m), coefficients, ops)
+    )
     weighted_density: Any = 0.0
     total_efficiency: Any = 0.0
     for centre_x, centre_y, efficiency in _propagating_lobes(grating, wi, wavelength_m, ops):
         dx, dy = wo[0] - centre_x, wo[1] - centre_y
-        if coefficients is None:
-            density = gaussian_density(dx, dy, covariance, ops)
-        else:
-            density = modal_lobe_density(dx, dy, covariance, coefficients, ops)
+        density = gaussian_density(dx, dy, covariance, ops) if modal is None else modal.density(dx, dy)
         weighted_density = weighted_density + efficiency * density
         total_efficiency = total_efficiency + efficiency
     return weighted_density, total_efficiency
@@ -222,7 +279,7 @@ def grating_eval(
     reflectance: Any,
     source_angular_cov: tuple[Any, Any, Any],
     ops: ArrayOps,
-    coefficients: Mapping[tuple[int, int], float] | None = None,
+    coefficients: Mapping[tuple[int, int], Any] | None = None,
 ) -> Any:
     """Diffracted BRDF f [1/sr] (non-specular orders, without cos θ_o); ``reflectance`` = F(θ_i)."""
     weighted_density, _ = _mixture_density(

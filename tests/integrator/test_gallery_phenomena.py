@@ -363,6 +363,19 @@ def test_mirror_fed_flank_receives_the_more_coherent_light(tmp_path: Path) -> No
     )
 
 
+def test_film_modes_reach_the_grating(tmp_path: Path) -> None:
+    """The large-source DVD (a grating and a diffuse backdrop only, so only the grating reads the modes):
+    with the same seed, 16 modes change the diffraction streak and nothing else — the pixels that change
+    are the disc's (issue 26: the grating ignored ``film.modes``, the renders were bitwise equal)."""
+    scene = example("fig1f_dvd_large_source", width=32, height=32, spp=8)
+    one = render("one", tmp_path, 32, 8, {**scene, "film": {**scene["film"], "modes": 1}})
+    sixteen = render("sixteen", tmp_path, 32, 8, {**scene, "film": {**scene["film"], "modes": 16}})
+    changed = np.any(one.bands != sixteen.bands, axis=-1)
+    assert changed.sum() >= 5
+    disc = one.depth_m < 0.2  # the disc is ≈ 0.14 m from the camera; the backdrop ≥ 0.3 m
+    assert np.all(disc[changed] | (sixteen.luminance[changed] < 1e-3 * one.luminance.max()))
+
+
 # --- Fig. 9: 1 vs 16 modes -----------------------------------------------------------------------
 
 

@@ -85,6 +85,16 @@ class VisibilityModel:
             result[j] = self.degree(coherence, xi, sigma, distance, wavelengths[j] * 1e-9)
         return result
 
+    def lobe_modes(self, coherence: IncidentCoherence) -> LobeModes:
+        """The modes of the light ``coherence`` describes, for lobes shaped by them (gratings): with one mode
+        every source is the Gaussian (``None``, the cheaper closed form)."""
+        if len(self.disk_coefficients) == 1:
+            return LobeModes(None, None, False)
+        rect = None
+        if self.rect_coefficients != self.disk_coefficients and self.rect_sources:
+            rect = self.rect_coefficients if coherence.rect_modes is None else coherence.rect_modes
+        return LobeModes(self.disk_coefficients, rect, coherence.rect_source)
+
     def degree(
         self,
         coherence: IncidentCoherence,
@@ -105,6 +115,16 @@ class VisibilityModel:
             mu_rect = degree_of_coherence(xi, sigma, distance_m, wavelength_m, rect_coefficients, OPS)
             mu = dr.select(coherence.rect_source, mu_rect, mu)
         return mu
+
+
+class LobeModes(NamedTuple):
+    """The coefficient sets a lobe shaped by the source's modes uses (``VisibilityModel.lobe_modes``): the
+    disk's (None: one mode, the Gaussian), the rectangle's where it differs (None: the same) and the lanes
+    whose source expands like a rectangle."""
+
+    disk: dict[tuple[int, int], float] | None
+    rect: dict[tuple[int, int], mi.Float] | dict[tuple[int, int], float] | None
+    rect_source: mi.Bool | bool
 
 
 class FilmSample(NamedTuple):

@@ -13,7 +13,15 @@ import mitsuba as mi
 
 from hgcore.optics import grating as grating_model
 from worker.render import materials as mat
-from worker.render.bsdfs.common import OPS, IncidentCoherence, Material, MaterialSample, ShadingPoint, vec
+from worker.render.bsdfs.common import (
+    OPS,
+    IncidentCoherence,
+    LobeModes,
+    Material,
+    MaterialSample,
+    ShadingPoint,
+    vec,
+)
 from worker.render.bsdfs.lobes import specular_or_lobe, split_specular
 
 
@@ -59,16 +67,36 @@ class Grating(Material):
         view = vec(self._to_grating(material, wi))
         angular_cov = self._angular_covariance(material, coherence, point.frame)
         fresnel = self.params.interface_reflectance(point.spectra, wo.z)
+        mode_sets = self.params.visibility.lobe_modes(coherence)
         value = mi.Spectrum(0.0)
         pdfs = mi.Spectrum(0.0)
         for j in range(len(wavelengths)):
             wavelength_m = wavelengths[j] * 1e-9
-            brdf = grating_model.grating_eval(
-                self.model, light, view, wavelength_m, fresnel[j], angular_cov, OPS
-            )
+            brdf = self._lobes(light, view, wavelength_m, fresnel[j], angular_cov, mode_sets)
             value[j] = brdf * wo.z
             pdfs[j] = grating_model.grating_pdf(self.model, view, light, wavelength_m, angular_cov, OPS)
         return value, pdfs
+
+    def _lobes(
+        self,
+        light: tuple[mi.Float, mi.Float, mi.Float],
+        view: tuple[mi.Float, mi.Float, mi.Float],
+        wavelength_m: mi.Float,
+        reflectance: mi.Float,
+        angular_cov: tuple[mi.Float, mi.Float, mi.Float],
+        mode_sets: LobeModes,
+    ) -> mi.Float:
+        """The diffracted BRDF under the incident light's modes: the disk's (or the Gaussian's), and the
+        rectangle's where the source expands like one."""
+        brdf = grating_model.grating_eval(
+            self.model, light, view, wavelength_m, reflectance, angular_cov, OPS, mode_sets.disk
+        )
+        if mode_sets.rect is not None:
+            brdf_rect = grating_model.grating_eval(
+                self.model, light, view, wavelength_m, reflectance, angular_cov, OPS, mode_sets.rect
+            )
+            brdf = dr.select(mode_sets.rect_source, brdf_rect, brdf)
+        return brdf
 
     def sample(self, point: ShadingPoint, sample1: mi.Float, sample2: mi.Point2f) -> MaterialSample:
         """The 0th order with probability η_00(λ_hero), else a diffraction lobe.
