@@ -43,7 +43,11 @@ from hgcore.artifacts.pixel_sums import PixelSums, variance_of_mean
 from hgcore.colour import image_xyz_weights, xyz_to_linear_srgb
 from hgcore.files import atomic_write_bytes
 from hgcore.imaging import display_rgb8, preview_exposure_ev
-from hgcore.optics.coherence import diagnostics_components, principal_axes_components
+from hgcore.optics.coherence import (
+    diagnostics_components,
+    positive_semidefinite_components,
+    principal_axes_components,
+)
 from hgcore.optics.frames import transverse_frame_components
 
 
@@ -98,7 +102,11 @@ def secondary_source_m(values: dict[str, np.ndarray]) -> SecondarySource:
 
     k2 = K_REFERENCE_PER_M**2
     m = (k2 * project(x_axis, x_axis), k2 * project(x_axis, y_axis), k2 * project(y_axis, y_axis))
-    m = tuple(np.where(usable, component, 0.0) for component in m)
+    # second − mean² cancels when the arrival directions agree (a small secondary source: k² ≈ 1.3e14/m²
+    # turns a float32 rounding of 1e-9 into |M| ≈ 1e5): the estimate is projected on the PSD matrices.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m = positive_semidefinite_components(*m)
+    m = tuple(np.where(usable, np.nan_to_num(component), 0.0) for component in m)
     # ℓ₁ runs along the eigenvector of M's smaller eigenvalue: e₂ = (−sin φ, cos φ) of principal_axes.
     with np.errstate(divide="ignore", invalid="ignore"):  # M = 0 where there is no estimate
         _, _, cos_phi, sin_phi = principal_axes_components(*m)
@@ -131,6 +139,9 @@ def images_from_sums(sums: PixelSums, bands: BandLayout) -> dict[str, np.ndarray
         np.where(covered, (values[key] + secondary.weight * m) / safe, 0.0)
         for key, m in zip(("diag_mxx", "diag_mxy", "diag_myy"), secondary.m_per_m2, strict=True)
     )
+    # A weighted mean of PSD matrices is PSD; float32 sums of nearly rank-one ones can round past it.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m_xx, m_xy, m_yy = (np.nan_to_num(m) for m in positive_semidefinite_components(m_xx, m_xy, m_yy))
     r_mean = np.where(covered, (values["diag_r"] + secondary.weighted_r) / safe, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         # (k/r)² Σ with r = k gives M itself: the diagnostics are computed from M directly.

@@ -215,6 +215,23 @@ def principal_axes_components(
     return lambda_major, lambda_minor, ops.cos(phi), ops.sin(phi)
 
 
+def positive_semidefinite_components(
+    m_xx: Any, m_xy: Any, m_yy: Any, ops: ArrayOps = NUMPY
+) -> tuple[Any, Any, Any]:
+    """The nearest positive-semidefinite 2×2 matrix (Frobenius norm) to the symmetric (m_xx, m_xy, m_yy):
+    negative eigenvalues set to 0. For estimates that are PSD in exact arithmetic but not after rounding
+    (a covariance from float32 raw moments, second − mean², which cancels when the directions agree)."""
+    lambda_major, lambda_minor, cos_phi, sin_phi = principal_axes_components(m_xx, m_xy, m_yy, ops)
+    lambda_major = ops.where(lambda_major > 0.0, lambda_major, 0.0)
+    lambda_minor = ops.where(lambda_major > 0.0, ops.maximum(lambda_minor, 0.0), 0.0)
+    cos_sq, sin_sq = cos_phi * cos_phi, sin_phi * sin_phi
+    return (
+        lambda_major * cos_sq + lambda_minor * sin_sq,
+        (lambda_major - lambda_minor) * cos_phi * sin_phi,
+        lambda_major * sin_sq + lambda_minor * cos_sq,
+    )
+
+
 def max_degree(coefficients: Mapping[tuple[int, int], float]) -> int:
     """The largest per-axis Hermite degree used by ``coefficients``."""
     return max(max(n, m) for n, m in coefficients)
