@@ -67,6 +67,7 @@ def main() -> dict[str, Any]:
     configure_mitsuba("llvm_ad_spectral")  # this benchmark's entry point, before the renderer is imported
     import OpenImageIO as oiio
 
+    from hgcore.settings import SceneLimits
     from tests.render.images import sky_image
     from tests.render.reference import band_box_specfilm
     from worker.render.renderer import Renderer
@@ -81,7 +82,7 @@ def main() -> dict[str, Any]:
         output.open(str(folder / "sky.exr"), oiio.ImageSpec(image.shape[1], image.shape[0], 3, "float"))
         output.write_image(image)
         output.close()
-        compiled = SceneCompiler(mi, folder).compile(validate_scene(scene()))
+        compiled = SceneCompiler(mi, folder, limits=SceneLimits()).compile(validate_scene(scene()))
         renderer = Renderer(compiled)
         ours = []
         for seed in range(SEEDS):

@@ -272,7 +272,9 @@ def _bounded(problems: list[SceneProblem]) -> list[SceneProblem]:
 def validate_scene(data: Any, limits: SceneLimits | None = None) -> Scene:
     """Validate a parsed JSON document into a :class:`Scene`; raise :class:`SceneError` with pointers.
 
-    ``limits`` defaults to ``SceneLimits()`` (read from ``HGRENDER_MAX_*`` environment variables).
+    ``limits``: the process's settings. None reads ``SceneLimits()`` from the ``HGRENDER_MAX_*``
+    environment variables, for tests and benchmarks only: every production call passes its own
+    (``tests/test_layering.py`` checks it), so no process re-reads its environment per scene.
     """
     limits = limits if limits is not None else SceneLimits()
     if not isinstance(data, dict):

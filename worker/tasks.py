@@ -143,6 +143,7 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
                 progress=horse.progress(job_id, chunk_index),
                 should_stop=should_stop,
                 bundle_dir=bundle_dir,
+                limits=horse.settings,
             )
         except RenderCanceledError:
             result = None
@@ -185,6 +186,7 @@ def render_job_task(job_id: str) -> dict[str, Any]:
                         progress=horse.progress(job_id, 0),
                         should_stop=should_stop,
                         bundle_dir=bundle_dir,
+                        limits=horse.settings,
                         target=target,
                         on_round=previews,
                         extra_summary={"job_id": job_id},

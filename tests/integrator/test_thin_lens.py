@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.settings import SceneLimits
 from schemas.validation import validate_scene
 from tests.render.exr import read_channels, spectral_stack
 from tests.render.reference import band_box_specfilm
@@ -67,7 +68,7 @@ def hg_blocks(scene: dict[str, Any], out: Path) -> tuple[np.ndarray, np.ndarray]
 def path_blocks(scene: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Block means and standard errors of Mitsuba's ``path`` with its ``thinlens`` (4 seeds × 128 spp)."""
     mi = configured_mitsuba()
-    compiled = SceneCompiler(mi).compile(validate_scene(scene))
+    compiled = SceneCompiler(mi, limits=SceneLimits()).compile(validate_scene(scene))
     scene_dict = dict(compiled.reference_dict)
     assert scene_dict["sensor"]["type"] == "thinlens"
     scene_dict["sensor"] = {**scene_dict["sensor"], "film": band_box_specfilm(compiled)}

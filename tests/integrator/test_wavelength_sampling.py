@@ -23,6 +23,7 @@ from hgcore.artifacts.images import images_from_sums
 from hgcore.artifacts.layout import BandLayout
 from hgcore.colour import linear_srgb_to_lab
 from hgcore.optics.spectra import cie_illuminant
+from hgcore.settings import SceneLimits
 from schemas import build
 from schemas.validation import validate_scene
 from tests.integrator.scenes import plane_under_source
@@ -144,7 +145,7 @@ def test_sampler_matches_its_density() -> None:
 def _render(scene: dict, mode: str, seed: int):
     scene = {**scene, "film": {**scene["film"], "wavelength_sampling": mode}}
     mi = configured_mitsuba()
-    compiled = SceneCompiler(mi).compile(validate_scene(scene))
+    compiled = SceneCompiler(mi, limits=SceneLimits()).compile(validate_scene(scene))
     sums = Renderer(compiled).render_sums(scene["film"]["spp"], seed)
     return images_from_sums(sums, compiled.bands)
 
