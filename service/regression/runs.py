@@ -102,9 +102,7 @@ class RunService:
         ]
         results = []
         for entry, scene in scenes:
-            view, _ = self.jobs.create(
-                scene.to_json_dict(), owner, name=f"regression {entry.key} (run {run_id[:8]})"
-            )
+            view, _ = self.jobs.create(scene, owner, name=f"regression {entry.key} (run {run_id[:8]})")
             results.append(SceneResult(scene=entry.key, job_id=view.id))
         run = RunView(
             id=run_id,
