@@ -29,6 +29,8 @@ JOB_KEYS = frozenset(
 )
 """The names of a job's Redis keys (``hgcore.jobs.keys``)."""
 KEY_OWNERS = frozenset({"hgcore/jobs/keys.py", "hgcore/jobs/lifecycle.py"})
+KEY_PREFIX = "hgrender:" + "job"
+"""How every key of a job's (``job:<id>…``, ``jobs…``) begins; written out only in ``hgcore/jobs/keys.py``."""
 
 
 def a_record(**fields: object) -> JobRecord:
@@ -75,8 +77,7 @@ def test_a_field_the_record_does_not_declare_is_refused() -> None:
         StepRecord.encode_step(0, attempt=2)
 
 
-def _names_used(path: Path) -> set[str]:
-    tree = ast.parse(path.read_text(), filename=str(path))
+def _names_used(tree: ast.Module) -> set[str]:
     names = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
     names |= {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
     names |= {
@@ -85,15 +86,55 @@ def _names_used(path: Path) -> set[str]:
     return names
 
 
+def _job_key_literals(tree: ast.Module) -> list[str]:
+    """The string literals (f-strings' text included) that spell out a job's Redis key, by line."""
+    return [
+        f"line {node.lineno}: a {KEY_PREFIX!r}… literal"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant) and str(node.value).startswith(KEY_PREFIX)
+    ]
+
+
+def job_key_users(root: Path, folders: tuple[str, ...], *, names: bool = True) -> dict[str, list[str]]:
+    """Modules under ``folders`` of ``root`` that write out a job's key (``"hgrender:job…"``) outside
+    ``hgcore/jobs/keys.py`` or (``names``) name one (the ``hgcore.jobs.keys`` functions and constants)
+    outside the owners."""
+    users = {}
+    for folder in folders:
+        for path in sorted((root / folder).rglob("*.py")):
+            relative = path.relative_to(root).as_posix()
+            tree = ast.parse(path.read_text(), filename=str(path))
+            found = sorted(_names_used(tree) & JOB_KEYS) if names and relative not in KEY_OWNERS else []
+            found += _job_key_literals(tree) if relative != "hgcore/jobs/keys.py" else []
+            if found:
+                users[relative] = found
+    return users
+
+
 def test_only_the_lifecycle_touches_a_jobs_keys() -> None:
     """A job's record, steps, scene and indexes are read and written by ``JobLifecycle`` alone; the API,
-    the tasks, the worker class, the reconciler and regression evaluation go through it."""
-    users = {
-        path.relative_to(REPO_ROOT).as_posix(): sorted(_names_used(path) & JOB_KEYS)
-        for package in PRODUCTION_PACKAGES
-        for path in (REPO_ROOT / package).rglob("*.py")
+    the tasks, the worker class, the reconciler, regression evaluation and the benchmarks go through it,
+    and nothing but ``hgcore.jobs.keys`` spells out a key."""
+    assert job_key_users(REPO_ROOT, (*PRODUCTION_PACKAGES, "bench")) == {}
+
+
+def test_tests_build_a_jobs_keys_with_the_key_functions() -> None:
+    """Tests that break a job's state on purpose (lose its scene, its record) name the keys through
+    ``hgcore.jobs.keys``, so that a renamed key cannot leave them deleting nothing."""
+    assert job_key_users(REPO_ROOT, ("tests",), names=False) == {}
+
+
+def test_a_key_spelled_out_or_named_outside_the_owner_is_found(tmp_path: Path) -> None:
+    (tmp_path / "bench").mkdir()
+    (tmp_path / "bench" / "raw.py").write_text(
+        'def fields(client, job_id):\n    return client.hgetall(f"hgrender:job:{job_id}:chunks")\n'
+    )
+    (tmp_path / "bench" / "named.py").write_text("from hgcore.jobs.keys import JOBS_BY_STATE\n")
+    (tmp_path / "bench" / "fine.py").write_text('TOKENS = "hgrender:token:*"\n')
+    assert job_key_users(tmp_path, ("bench",)) == {
+        "bench/named.py": ["JOBS_BY_STATE"],
+        "bench/raw.py": ["line 2: a 'hgrender:job'… literal"],
     }
-    assert {path: names for path, names in users.items() if names and path not in KEY_OWNERS} == {}
 
 
 @pytest.fixture
