@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import json
+import re
 import time
 import uuid
 from collections.abc import Iterator
@@ -135,6 +136,57 @@ def test_a_key_spelled_out_or_named_outside_the_owner_is_found(tmp_path: Path) -
         "bench/named.py": ["JOBS_BY_STATE"],
         "bench/raw.py": ["line 2: a 'hgrender:job'… literal"],
     }
+
+
+LIFECYCLE_SECTION = "## The job lifecycle (one line a module)"
+JOBS_PACKAGE = frozenset({"hgcore/jobs/__init__.py"})
+
+
+def lifecycle_picture(markdown: str) -> list[str]:
+    """The lines of the code block in ``docs/architecture.md``'s job-lifecycle section."""
+    section = markdown.split(LIFECYCLE_SECTION, 1)[1].split("\n## ", 1)[0]
+    return section.split("```", 2)[1].strip("\n").splitlines()
+
+
+def picture_problems(lines: list[str], root: Path) -> list[str]:
+    """What is wrong with the picture: a line that does not begin with one module's path, a module with
+    more than one line, a path it names that does not exist, a module of ``hgcore/jobs/`` left out."""
+    problems = []
+    modules = [line.split(maxsplit=1)[0] if line.strip() else "" for line in lines]
+    for line, module in zip(lines, modules, strict=True):
+        if not module.endswith(".py") or line.startswith(" "):
+            problems.append(f"not a module's line: {line!r}")
+    problems += [f"{m} has {modules.count(m)} lines" for m in sorted(set(modules)) if modules.count(m) > 1]
+    named = set(re.findall(r"[\w./]+\.py\b", "\n".join(lines)))
+    problems += [f"{path} does not exist" for path in sorted(named) if not (root / path).is_file()]
+    jobs = {p.relative_to(root).as_posix() for p in (root / "hgcore" / "jobs").glob("*.py")}
+    problems += [f"{path} is not in the picture" for path in sorted(jobs - set(modules) - JOBS_PACKAGE)]
+    return problems
+
+
+def test_the_architecture_docs_picture_every_lifecycle_module_once() -> None:
+    lines = lifecycle_picture((REPO_ROOT / "docs" / "architecture.md").read_text())
+    assert len(lines) >= 10
+    assert picture_problems(lines, REPO_ROOT) == []
+
+
+def test_a_wrong_lifecycle_picture_is_found(tmp_path: Path) -> None:
+    (tmp_path / "hgcore" / "jobs").mkdir(parents=True)
+    for name in ("__init__.py", "keys.py", "lifecycle.py", "status.py"):
+        (tmp_path / "hgcore" / "jobs" / name).write_text("")
+    lines = [
+        "hgcore/jobs/lifecycle.py   the owner; keys in hgcore/jobs/keys.py",
+        "                           a continuation line",
+        "hgcore/jobs/lifecycle.py   a second line of the same module",
+        "service/gone.py            renamed away",
+    ]
+    assert picture_problems(lines, tmp_path) == [
+        "not a module's line: '                           a continuation line'",
+        "hgcore/jobs/lifecycle.py has 2 lines",
+        "service/gone.py does not exist",
+        "hgcore/jobs/keys.py is not in the picture",
+        "hgcore/jobs/status.py is not in the picture",
+    ]
 
 
 @pytest.fixture
