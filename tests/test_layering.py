@@ -353,3 +353,43 @@ def test_a_call_without_limits_is_found() -> None:
     )
     missing = calls_without_limits({"m.py": ast.parse(source)})
     assert missing == ["m.py:10 Compiler(...)", "m.py:6 validate_scene(...)", "m.py:8 render(...)"]
+
+
+def imports_of_other_areas(root: Path) -> list[str]:
+    """Imports of a helper of one test area (``tests/<area>/<module>.py``) from outside that area: the
+    other areas, the top-level test modules and the benchmarks (shared helpers live in ``tests/support``)."""
+    offenders = []
+    paths = [*sorted((root / "tests").rglob("*.py")), *sorted((root / "bench").rglob("*.py"))]
+    for path in paths:
+        relative = path.relative_to(root)
+        area = relative.parts[1] if relative.parts[0] == "tests" and len(relative.parts) > 2 else None
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.module is not None:
+                package = node.module.count(".") < 2  # ``from tests.render import scenes``: name the module
+                names += [f"{node.module}.{a.name}" for a in node.names] if package else [node.module]
+            for name in names:
+                parts = name.split(".")
+                if parts[0] == "tests" and len(parts) > 1 and parts[1] not in ("support", area):
+                    offenders.append(f"{relative.as_posix()} imports {name}")
+    return offenders
+
+
+def test_a_helper_of_one_area_is_imported_only_there() -> None:
+    """tests/README.md: helpers of one area stay beside its tests; what two areas (or a benchmark) share
+    lives in ``tests/support``."""
+    assert imports_of_other_areas(REPO_ROOT) == []
+
+
+def test_an_import_of_another_areas_helper_is_found(tmp_path: Path) -> None:
+    for folder in ("tests/render", "tests/integrator", "bench"):
+        (tmp_path / folder).mkdir(parents=True)
+    (tmp_path / "tests" / "render" / "test_a.py").write_text("from tests.render.exr import read\n")
+    (tmp_path / "tests" / "integrator" / "test_b.py").write_text(
+        "from tests.render import scenes\nimport tests.support.exr\n"
+    )
+    (tmp_path / "bench" / "bench_c.py").write_text("def f():\n    from tests.render.images import sky\n")
+    assert imports_of_other_areas(tmp_path) == [
+        "tests/integrator/test_b.py imports tests.render.scenes",
+        "bench/bench_c.py imports tests.render.images",
+    ]

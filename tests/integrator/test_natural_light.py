@@ -26,9 +26,9 @@ from hgcore.artifacts.layout import K_REFERENCE_PER_M
 from hgcore.settings import SceneLimits
 from schemas.photometry import emitter_radiance_scale, evaluate_spectrum
 from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
-from tests.render.images import sky_image, write_image
-from tests.render.reference import image_mean_with_error, path_band_means
+from tests.support.exr import read_channels, spectral_stack
+from tests.support.images import sky_image, write_image
+from tests.support.reference import image_mean_with_error, path_band_means
 from tests.support.sums import assert_bitwise_equal, sums_of
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.chunks import render_scene

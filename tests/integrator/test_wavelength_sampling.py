@@ -27,7 +27,7 @@ from hgcore.settings import SceneLimits
 from schemas import build
 from schemas.validation import validate_scene
 from tests.integrator.scenes import plane_under_source
-from tests.render.chi2 import discrete_chi2, sidak_level
+from tests.support.chi2 import discrete_chi2, sidak_level
 from tests.support.scenes import example
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.renderer import Renderer
@@ -196,7 +196,7 @@ def test_importance_lowers_chroma_variance_under_f11() -> None:
 
 
 def test_cornell_box_under_f11_matches_path(tmp_path: Path) -> None:
-    from tests.render.reference import assert_agreement
+    from tests.support.reference import assert_agreement
 
     scene = example("cornell_box", width=32, height=32, spp=512, bands=8, max_depth=5)
     for emitter in scene["emitters"]:

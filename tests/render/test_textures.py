@@ -23,8 +23,8 @@ from schemas.errors import SceneError
 from schemas.scene import ImageTexture
 from schemas.textures import check_scene_images
 from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
-from tests.render.images import linear_to_srgb, write_image
+from tests.support.exr import read_channels, spectral_stack
+from tests.support.images import linear_to_srgb, write_image
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.chunks import ChunkSpec, render_chunk, render_scene, renderer_for
 from worker.render.scene_compiler import SceneCompiler

@@ -26,7 +26,7 @@ import numpy as np
 
 from hgcore.settings import SceneLimits
 from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
+from tests.support.exr import read_channels, spectral_stack
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.chunks import render_scene
 from worker.render.scene_compiler import CompiledScene, SceneCompiler
