@@ -36,10 +36,7 @@ def _probe(scene_name: str) -> float:
 
     if hasattr(mitsuba_setup, "configure_mitsuba"):  # older trees chose the variant when imported
         mitsuba_setup.configure_mitsuba("llvm_ad_spectral")
-    try:
-        from worker.render.chunks import renderer_for
-    except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
-        from worker.render.chunks import renderer_for  # type: ignore[no-redef]
+    from worker.render.chunks import renderer_for
 
     data = json.loads((ROOT / "schemas" / "examples" / scene_name).read_text())
     data["film"] = {**data["film"], "width": SIZE_PX, "height": SIZE_PX, "spp": SPP, "bands": BANDS}

@@ -7,7 +7,7 @@ sampling is for), one band over 380–780 nm (so spectral sampling adds the same
 wavelengths per path, uniform in the band), max depth 4.
 
 Both integrators render ``SEEDS`` independent images at ``SPP`` spp (Mitsuba's through a one-band
-``specfilm``, tests/render/reference.py); per pixel the variance across the seeds estimates the variance of
+``specfilm``, tests/support/reference.py); per pixel the variance across the seeds estimates the variance of
 a ``SPP``-sample estimate. Reported: the mean of the per-pixel variances over the sphere's pixels and over
 the image, each integrator's image mean (they must agree), and the ratio hg_path/path with the relative
 standard error of each mean variance (from the spread of the per-pixel variances). Results: stdout and
@@ -67,8 +67,9 @@ def main() -> dict[str, Any]:
     configure_mitsuba("llvm_ad_spectral")  # this benchmark's entry point, before the renderer is imported
     import OpenImageIO as oiio
 
-    from tests.render.images import sky_image
-    from tests.render.reference import band_box_specfilm
+    from hgcore.settings import SceneLimits
+    from tests.support.images import sky_image
+    from tests.support.reference import band_box_specfilm
     from worker.render.renderer import Renderer
     from worker.render.scene_compiler import SceneCompiler
 
@@ -81,7 +82,7 @@ def main() -> dict[str, Any]:
         output.open(str(folder / "sky.exr"), oiio.ImageSpec(image.shape[1], image.shape[0], 3, "float"))
         output.write_image(image)
         output.close()
-        compiled = SceneCompiler(mi, folder).compile(validate_scene(scene()))
+        compiled = SceneCompiler(mi, folder, limits=SceneLimits()).compile(validate_scene(scene()))
         renderer = Renderer(compiled)
         ours = []
         for seed in range(SEEDS):

@@ -127,11 +127,12 @@ def _time_renders(renders: dict[str, Callable[[int], Any]], samples: int, repeat
 
 
 def _renderer(mi: Any, scene: dict[str, Any]) -> Any:
+    from hgcore.settings import SceneLimits
     from schemas.validation import validate_scene
     from worker.render.renderer import Renderer
     from worker.render.scene_compiler import SceneCompiler
 
-    return Renderer(SceneCompiler(mi).compile(validate_scene(scene)))
+    return Renderer(SceneCompiler(mi, limits=SceneLimits()).compile(validate_scene(scene)))
 
 
 def _hg_renders(mi: Any, scene_name: str) -> dict[str, Callable[[int], Any]]:

@@ -31,12 +31,16 @@ import redis
 
 from bench.bench_scaleout import _scene  # the same Cornell box scene
 from bench.machine import cpu_model, cpu_reference_s, write_results
+from hgcore.jobs.lifecycle import JobLifecycle
+from hgcore.store.filesystem import FilesystemStore
 from hgrender.client import HgrenderClient
 from service.redis_server import RedisServer, free_loopback_port
 
 
-def _fields(client: redis.Redis, job_id: str) -> dict[str, str]:
-    return {k.decode(): v.decode() for k, v in client.hgetall(f"hgrender:job:{job_id}:chunks").items()}
+def _retry_started_at(lifecycle: JobLifecycle, job_id: str) -> float | None:
+    """When chunk 0's second attempt started (None before it did)."""
+    chunk = lifecycle.steps(job_id).chunks[0]
+    return chunk.started_at if chunk.attempts == 2 else None
 
 
 def _wait(predicate: Any, timeout_s: float) -> Any:
@@ -68,37 +72,38 @@ def measure(jobs: int, size_px: int, spp: int) -> dict[str, Any]:
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
-        store = redis.Redis.from_url(redis_server.url)
+        redis_client = redis.Redis.from_url(redis_server.url)
+        # The job's steps as the workers booked them, read through their owner (hgcore.jobs.lifecycle).
+        lifecycle = JobLifecycle(redis_client, FilesystemStore(Path(data_dir) / "artifacts"))
         try:
             with HgrenderClient(f"http://127.0.0.1:{port}") as client:
                 _wait(lambda: _answers(client), 60)
                 warm = client.submit(_scene(size_px, 2), chunks=2)["id"]  # Dr.Jit's kernel cache
                 client.wait(warm, timeout_s=300)
                 job_ids = [client.submit(_scene(size_px, spp), chunks=2)["id"] for _ in range(jobs)]
-                _wait(lambda: float(_fields(store, job_ids[0]).get("0.progress", 0) or 0) > 0, 120)
+                _wait(lambda: lifecycle.steps(job_ids[0]).chunks[0].progress > 0, 120)
                 killed_at = time.time()
-                os.kill(int(_fields(store, job_ids[0])["0.pid"]), signal.SIGKILL)
-                retried_at = _wait(
-                    lambda: (
-                        (f := _fields(store, job_ids[0])).get("0.attempts") == "2"
-                        and float(f["0.started_at"])
-                    ),
-                    600,
-                )
+                pid = lifecycle.steps(job_ids[0]).chunks[0].pid
+                assert pid is not None, "a chunk with progress has a pid"
+                os.kill(pid, signal.SIGKILL)
+                retried_at = _wait(lambda: _retry_started_at(lifecycle, job_ids[0]), 600)
                 finals = [client.wait(job_id, timeout_s=900) for job_id in job_ids]
         finally:
             server.send_signal(signal.SIGTERM)
             server.wait(timeout=120)
         waits = []
         for job_id in job_ids:
-            fields = _fields(store, job_id)
-            last_chunk_end = max(float(fields[f"{i}.finished_at"]) for i in range(2))
-            waits.append(float(fields["merge.started_at"]) - last_chunk_end)
+            steps = lifecycle.steps(job_id)
+            assert steps.merge is not None and steps.merge.started_at is not None, job_id
+            ends = [chunk.finished_at for chunk in steps.chunks]
+            assert None not in ends, job_id
+            last_chunk_end = max(end for end in ends if end is not None)
+            waits.append(steps.merge.started_at - last_chunk_end)
         order = sorted(range(jobs), key=lambda i: finals[i]["timings"]["finished_at"])
         inversions = sum(
             1 for a in range(jobs) for b in range(a + 1, jobs) if order.index(a) > order.index(b)
         )
-        store.close()
+        redis_client.close()
     return {
         "jobs": jobs,
         "size_px": size_px,

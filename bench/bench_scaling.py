@@ -62,10 +62,7 @@ def probe(resolution_px: int, spp: int, bands: int, target_rel_error: float = 0.
 
     if hasattr(mitsuba_setup, "configure_mitsuba"):  # older trees chose the variant when imported
         mitsuba_setup.configure_mitsuba("llvm_ad_spectral")
-    try:
-        from worker.render.chunks import render_scene
-    except ModuleNotFoundError:  # trees from before its rename (worker.render.api)
-        from worker.render.chunks import render_scene  # type: ignore[no-redef]
+    from worker.render.chunks import render_scene
 
     target = NoiseTarget(rel_error=target_rel_error) if target_rel_error > 0 else None
 

@@ -120,10 +120,13 @@ def _textured_film(scene: dict[str, Any], folder: Path) -> dict[str, Any]:
 
 
 def _renderer(scene: dict[str, Any], folder: Path) -> Renderer:
+    from hgcore.settings import SceneLimits
     from worker.render.renderer import Renderer
     from worker.render.scene_compiler import SceneCompiler
 
-    return Renderer(SceneCompiler(configured_mitsuba(), folder).compile(validate_scene(scene)))
+    return Renderer(
+        SceneCompiler(configured_mitsuba(), folder, limits=SceneLimits()).compile(validate_scene(scene))
+    )
 
 
 def _pair(constant: Renderer, textured: Renderer) -> dict[str, Any]:
@@ -140,12 +143,13 @@ def _pair(constant: Renderer, textured: Renderer) -> dict[str, Any]:
 
 def _mitsuba_pair(constant: dict[str, Any], textured: dict[str, Any], folder: Path) -> dict[str, Any]:
     """The same pair rendered by Mitsuba's ``path`` (its BSDFs: ``diffuse`` with ``bitmap`` textures)."""
+    from hgcore.settings import SceneLimits
     from worker.render.scene_compiler import SceneCompiler
 
     mi = configured_mitsuba()
 
     def loaded(scene: dict[str, Any]) -> Any:
-        compiled = SceneCompiler(mi, folder).compile(validate_scene(scene))
+        compiled = SceneCompiler(mi, folder, limits=SceneLimits()).compile(validate_scene(scene))
         reference = {**compiled.reference_dict, "integrator": {"type": "path", "max_depth": 8}}
         return mi.load_dict(reference, optimize=False)
 

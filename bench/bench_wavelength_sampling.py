@@ -73,12 +73,13 @@ def scenes() -> dict[str, dict[str, Any]]:
 
 
 def _renderer(scene: dict[str, Any], mode: str) -> Renderer:
+    from hgcore.settings import SceneLimits
     from worker.mitsuba_setup import configured_mitsuba
     from worker.render.renderer import Renderer
     from worker.render.scene_compiler import SceneCompiler
 
     scene = {**scene, "film": {**scene["film"], "wavelength_sampling": mode}}
-    return Renderer(SceneCompiler(configured_mitsuba()).compile(validate_scene(scene)))
+    return Renderer(SceneCompiler(configured_mitsuba(), limits=SceneLimits()).compile(validate_scene(scene)))
 
 
 def _rgb(renderer: Renderer, spp: int, seed: int) -> np.ndarray:

@@ -272,7 +272,9 @@ def _bounded(problems: list[SceneProblem]) -> list[SceneProblem]:
 def validate_scene(data: Any, limits: SceneLimits | None = None) -> Scene:
     """Validate a parsed JSON document into a :class:`Scene`; raise :class:`SceneError` with pointers.
 
-    ``limits`` defaults to ``SceneLimits()`` (read from ``HGRENDER_MAX_*`` environment variables).
+    ``limits``: the process's settings. None reads ``SceneLimits()`` from the ``HGRENDER_MAX_*``
+    environment variables, for tests and benchmarks only: every production call passes its own
+    (``tests/test_layering.py`` checks it), so no process re-reads its environment per scene.
     """
     limits = limits if limits is not None else SceneLimits()
     if not isinstance(data, dict):
@@ -294,8 +296,9 @@ def validate_scene(data: Any, limits: SceneLimits | None = None) -> Scene:
     return scene
 
 
-def validate_scene_json(text: str | bytes, limits: SceneLimits | None = None) -> Scene:
-    """Parse and validate a JSON scene document, enforcing ``limits.max_file_bytes`` before parsing."""
+def load_scene_json(text: str | bytes, limits: SceneLimits | None = None) -> Any:
+    """Parse a JSON scene document, enforcing ``limits.max_file_bytes`` before parsing (not validated:
+    :func:`validate_scene` does that, once, after any film overrides are written in)."""
     limits = limits if limits is not None else SceneLimits()
     size_bytes = len(text.encode() if isinstance(text, str) else text)
     if size_bytes > limits.max_file_bytes:
@@ -305,16 +308,23 @@ def validate_scene_json(text: str | bytes, limits: SceneLimits | None = None) ->
             "(HGRENDER_MAX_FILE_BYTES)",
         )
     try:
-        data = json.loads(text)
+        return json.loads(text)
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
         raise SceneError.at("", f"not valid JSON: {error}") from None
-    return validate_scene(data, limits)
 
 
-def override_film(document: dict[str, Any], **film: Any) -> dict[str, Any]:
-    """The scene document with the film fields in ``film`` that are not None replaced (not validated)."""
+def validate_scene_json(text: str | bytes, limits: SceneLimits | None = None) -> Scene:
+    """Parse and validate a JSON scene document, enforcing ``limits.max_file_bytes`` before parsing."""
+    return validate_scene(load_scene_json(text, limits), limits)
+
+
+def override_film(document: Any, **film: Any) -> Any:
+    """The scene document with the film fields in ``film`` that are not None replaced (not validated).
+
+    A document that is not an object, or whose ``film`` is not one, is returned as it is: validating it
+    then reports it (at ``""`` or ``/film``) exactly as without overrides."""
     changes = {key: value for key, value in film.items() if value is not None}
-    if not changes:
+    if not changes or not isinstance(document, dict) or not isinstance(document.get("film", {}), dict):
         return document
     return {**document, "film": {**document.get("film", {}), **changes}}
 

@@ -1,7 +1,7 @@
 """Server-Sent Events of one job: a ``status`` event with the full job view first, then ``progress``
 events as chunks advance and a ``status`` event at every status change, until a final status.
 
-Workers publish to the Redis channel ``hgrender:events:<id>`` (``JobRecords.publish``). The stream
+Workers publish to the Redis channel ``hgrender:events:<id>`` (``JobLifecycle.publish``). The stream
 subscribes *before* reading the first snapshot, so no change between the two is missed, and re-reads
 the job every ``resync_s`` so that a lost message (e.g. Redis restarted) cannot stall a client.
 """

@@ -28,6 +28,7 @@ from hgcore.jobs.status import JobStatus, Priority
 from hgcore.jobs.views import JobView, build_view
 from hgcore.noise_target import NoiseTarget
 from hgcore.settings import Settings
+from schemas import Scene
 
 _IDEMPOTENCY_WAIT_S = 2.0
 
@@ -63,7 +64,7 @@ class JobService:
 
     def create(
         self,
-        scene: dict[str, Any],
+        scene: Scene,
         owner: str,
         *,
         priority: Priority = "normal",
@@ -73,8 +74,8 @@ class JobService:
         name: str | None = None,
         extra_files: Mapping[str, bytes] | None = None,
     ) -> tuple[JobView, bool]:
-        """Persist a validated scene (its ``film.spp`` and ``film.seed`` are the job's) and enqueue its
-        chunks and merge step.
+        """Persist a validated scene (its ``film.spp`` and ``film.seed`` are the job's; its document,
+        ``Scene.to_json_dict``, is what the lifecycle stores) and enqueue its chunks and merge step.
 
         Returns (job, created); ``created`` is False when ``idempotency_key`` named an earlier job.
         ``extra_files`` (relative names → bytes) are stored next to the scene (textures of a USD bundle).
@@ -82,9 +83,8 @@ class JobService:
         """
         if priority not in PRIORITY_QUEUES:
             raise InputError(f"priority: must be one of {list(PRIORITY_QUEUES)}")
-        spp = int(scene["film"]["spp"])
-        base_seed = int(scene["film"].get("seed", 0))
-        chunk_count = self.plan(spp, chunks, noise_target)
+        film = scene.film
+        chunk_count = self.plan(film.spp, chunks, noise_target)
         job_id = uuid.uuid4().hex
         if idempotency_key is not None:
             earlier = self._claim_idempotency_key(owner, idempotency_key, job_id)
@@ -99,10 +99,10 @@ class JobService:
             name=name or None,
             status=JobStatus.QUEUED,
             priority=priority,
-            spp=spp,
-            width=scene["film"].get("width"),
-            height=scene["film"].get("height"),
-            seed=base_seed,
+            spp=film.spp,
+            width=film.width,
+            height=film.height,
+            seed=film.seed,
             chunk_count=chunk_count,
             target_rel_error=noise_target.rel_error if noise_target is not None else None,
             time_budget_s=noise_target.time_budget_s if noise_target is not None else None,
@@ -112,7 +112,7 @@ class JobService:
         # One MULTI/EXEC: the record, the scene and every RQ job appear together, and the merge step is
         # registered as a dependent before any chunk exists that could finish.
         try:
-            self._commit(record, scene)
+            self._commit(record, scene.to_json_dict())
         except Exception:
             self.store.delete_prefix(job_prefix(job_id))  # uploaded bundle files, if any
             raise

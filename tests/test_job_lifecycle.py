@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import json
+import re
 import time
 import uuid
 from collections.abc import Iterator
@@ -29,6 +30,8 @@ JOB_KEYS = frozenset(
 )
 """The names of a job's Redis keys (``hgcore.jobs.keys``)."""
 KEY_OWNERS = frozenset({"hgcore/jobs/keys.py", "hgcore/jobs/lifecycle.py"})
+KEY_PREFIX = "hgrender:" + "job"
+"""How every key of a job's (``job:<id>…``, ``jobs…``) begins; written out only in ``hgcore/jobs/keys.py``."""
 
 
 def a_record(**fields: object) -> JobRecord:
@@ -75,8 +78,7 @@ def test_a_field_the_record_does_not_declare_is_refused() -> None:
         StepRecord.encode_step(0, attempt=2)
 
 
-def _names_used(path: Path) -> set[str]:
-    tree = ast.parse(path.read_text(), filename=str(path))
+def _names_used(tree: ast.Module) -> set[str]:
     names = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
     names |= {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
     names |= {
@@ -85,15 +87,106 @@ def _names_used(path: Path) -> set[str]:
     return names
 
 
+def _job_key_literals(tree: ast.Module) -> list[str]:
+    """The string literals (f-strings' text included) that spell out a job's Redis key, by line."""
+    return [
+        f"line {node.lineno}: a {KEY_PREFIX!r}… literal"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant) and str(node.value).startswith(KEY_PREFIX)
+    ]
+
+
+def job_key_users(root: Path, folders: tuple[str, ...], *, names: bool = True) -> dict[str, list[str]]:
+    """Modules under ``folders`` of ``root`` that write out a job's key (``"hgrender:job…"``) outside
+    ``hgcore/jobs/keys.py`` or (``names``) name one (the ``hgcore.jobs.keys`` functions and constants)
+    outside the owners."""
+    users = {}
+    for folder in folders:
+        for path in sorted((root / folder).rglob("*.py")):
+            relative = path.relative_to(root).as_posix()
+            tree = ast.parse(path.read_text(), filename=str(path))
+            found = sorted(_names_used(tree) & JOB_KEYS) if names and relative not in KEY_OWNERS else []
+            found += _job_key_literals(tree) if relative != "hgcore/jobs/keys.py" else []
+            if found:
+                users[relative] = found
+    return users
+
+
 def test_only_the_lifecycle_touches_a_jobs_keys() -> None:
     """A job's record, steps, scene and indexes are read and written by ``JobLifecycle`` alone; the API,
-    the tasks, the worker class, the reconciler and regression evaluation go through it."""
-    users = {
-        path.relative_to(REPO_ROOT).as_posix(): sorted(_names_used(path) & JOB_KEYS)
-        for package in PRODUCTION_PACKAGES
-        for path in (REPO_ROOT / package).rglob("*.py")
+    the tasks, the worker class, the reconciler, regression evaluation and the benchmarks go through it,
+    and nothing but ``hgcore.jobs.keys`` spells out a key."""
+    assert job_key_users(REPO_ROOT, (*PRODUCTION_PACKAGES, "bench")) == {}
+
+
+def test_tests_build_a_jobs_keys_with_the_key_functions() -> None:
+    """Tests that break a job's state on purpose (lose its scene, its record) name the keys through
+    ``hgcore.jobs.keys``, so that a renamed key cannot leave them deleting nothing."""
+    assert job_key_users(REPO_ROOT, ("tests",), names=False) == {}
+
+
+def test_a_key_spelled_out_or_named_outside_the_owner_is_found(tmp_path: Path) -> None:
+    (tmp_path / "bench").mkdir()
+    (tmp_path / "bench" / "raw.py").write_text(
+        'def fields(client, job_id):\n    return client.hgetall(f"hgrender:job:{job_id}:chunks")\n'
+    )
+    (tmp_path / "bench" / "named.py").write_text("from hgcore.jobs.keys import JOBS_BY_STATE\n")
+    (tmp_path / "bench" / "fine.py").write_text('TOKENS = "hgrender:token:*"\n')
+    assert job_key_users(tmp_path, ("bench",)) == {
+        "bench/named.py": ["JOBS_BY_STATE"],
+        "bench/raw.py": ["line 2: a 'hgrender:job'… literal"],
     }
-    assert {path: names for path, names in users.items() if names and path not in KEY_OWNERS} == {}
+
+
+LIFECYCLE_SECTION = "## The job lifecycle (one line a module)"
+JOBS_PACKAGE = frozenset({"hgcore/jobs/__init__.py"})
+
+
+def lifecycle_picture(markdown: str) -> list[str]:
+    """The lines of the code block in ``docs/architecture.md``'s job-lifecycle section."""
+    section = markdown.split(LIFECYCLE_SECTION, 1)[1].split("\n## ", 1)[0]
+    return section.split("```", 2)[1].strip("\n").splitlines()
+
+
+def picture_problems(lines: list[str], root: Path) -> list[str]:
+    """What is wrong with the picture: a line that does not begin with one module's path, a module with
+    more than one line, a path it names that does not exist, a module of ``hgcore/jobs/`` left out."""
+    problems = []
+    modules = [line.split(maxsplit=1)[0] if line.strip() else "" for line in lines]
+    for line, module in zip(lines, modules, strict=True):
+        if not module.endswith(".py") or line.startswith(" "):
+            problems.append(f"not a module's line: {line!r}")
+    problems += [f"{m} has {modules.count(m)} lines" for m in sorted(set(modules)) if modules.count(m) > 1]
+    named = set(re.findall(r"[\w./]+\.py\b", "\n".join(lines)))
+    problems += [f"{path} does not exist" for path in sorted(named) if not (root / path).is_file()]
+    jobs = {p.relative_to(root).as_posix() for p in (root / "hgcore" / "jobs").glob("*.py")}
+    problems += [f"{path} is not in the picture" for path in sorted(jobs - set(modules) - JOBS_PACKAGE)]
+    return problems
+
+
+def test_the_architecture_docs_picture_every_lifecycle_module_once() -> None:
+    lines = lifecycle_picture((REPO_ROOT / "docs" / "architecture.md").read_text())
+    assert len(lines) >= 10
+    assert picture_problems(lines, REPO_ROOT) == []
+
+
+def test_a_wrong_lifecycle_picture_is_found(tmp_path: Path) -> None:
+    (tmp_path / "hgcore" / "jobs").mkdir(parents=True)
+    for name in ("__init__.py", "keys.py", "lifecycle.py", "status.py"):
+        (tmp_path / "hgcore" / "jobs" / name).write_text("")
+    lines = [
+        "hgcore/jobs/lifecycle.py   the owner; keys in hgcore/jobs/keys.py",
+        "                           a continuation line",
+        "hgcore/jobs/lifecycle.py   a second line of the same module",
+        "service/gone.py            renamed away",
+    ]
+    assert picture_problems(lines, tmp_path) == [
+        "not a module's line: '                           a continuation line'",
+        "hgcore/jobs/lifecycle.py has 2 lines",
+        "service/gone.py does not exist",
+        "hgcore/jobs/keys.py is not in the picture",
+        "hgcore/jobs/status.py is not in the picture",
+    ]
 
 
 @pytest.fixture

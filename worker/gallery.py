@@ -59,8 +59,11 @@ def camera_description(entry: GalleryEntry) -> str:
     return f"a thin lens of radius {radius_m * 1e3:g} mm focused at {focus_text}"
 
 
-def render_entry(entry: GalleryEntry, size_px: int | None, spp: int | None, out_dir: Path) -> dict[str, Any]:
-    """Render one entry into ``out_dir``; its summary.json gains ``wall_s`` and ``gallery`` fields."""
+def render_entry(
+    entry: GalleryEntry, size_px: int | None, spp: int | None, out_dir: Path, settings: Settings
+) -> dict[str, Any]:
+    """Render one entry into ``out_dir`` under this process's ``settings`` (its scene limits); its
+    summary.json gains ``wall_s`` and ``gallery`` fields."""
     from worker.render.chunks import render_scene
 
     scene = gallery_scene(entry, size_px, spp)
@@ -70,7 +73,13 @@ def render_entry(entry: GalleryEntry, size_px: int | None, spp: int | None, out_
     def progress(fraction: float) -> None:  # long renders show progress (one stderr line, redrawn)
         print(f"\r{entry.name}: {fraction:6.1%}", end="", file=sys.stderr, flush=True)
 
-    summary = render_scene(validate_scene(scene), out_dir, chunks=PROGRESS_CHUNKS, progress=progress)
+    summary = render_scene(
+        validate_scene(scene, settings),
+        out_dir,
+        chunks=PROGRESS_CHUNKS,
+        progress=progress,
+        limits=settings,
+    )
     print(file=sys.stderr)
     wall_s = time.perf_counter() - start
     summary = {
@@ -211,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         out_dir = GALLERY_DIR / entry.name
         size, spp = (None, None) if args.defaults else (args.size, args.spp)
-        summary = render_entry(entry, size, spp, out_dir)
+        summary = render_entry(entry, size, spp, out_dir, settings)
         gallery = summary["gallery"]
         print(f"{entry.name}: {gallery['width']}² {gallery['spp']} spp {summary['wall_s']} s")
         if not args.defaults:

@@ -27,7 +27,7 @@ from rq.job import Job as RQJob
 from hgcore.artifacts.keys import chunk_key, input_prefix
 from hgcore.jobs.lifecycle import JobLifecycle
 from hgcore.jobs.queue_graph import chunk_failures
-from hgcore.jobs.record import JobRecord
+from hgcore.jobs.record import MERGE_STEP, JobRecord
 from hgcore.regression.evaluation import RunEvaluator
 from hgcore.settings import Settings
 from hgcore.store import store_from_settings
@@ -143,6 +143,7 @@ def render_chunk_task(job_id: str, chunk_index: int) -> dict[str, Any]:
                 progress=horse.progress(job_id, chunk_index),
                 should_stop=should_stop,
                 bundle_dir=bundle_dir,
+                limits=horse.settings,
             )
         except RenderCanceledError:
             result = None
@@ -185,6 +186,7 @@ def render_job_task(job_id: str) -> dict[str, Any]:
                         progress=horse.progress(job_id, 0),
                         should_stop=should_stop,
                         bundle_dir=bundle_dir,
+                        limits=horse.settings,
                         target=target,
                         on_round=previews,
                         extra_summary={"job_id": job_id},
@@ -195,7 +197,7 @@ def render_job_task(job_id: str) -> dict[str, Any]:
                 horse.lifecycle.mark_chunk_canceled(job_id, 0)
                 return {"canceled": True}
             horse.lifecycle.finish_chunk(job_id, 0, summary["samples"], summary["render_seconds"])
-            with _step("merge"):
+            with _step(MERGE_STEP):
                 merge_started_s = _start_merge(horse, job_id)
                 return horse.lifecycle.finalize(job_id, out_dir, summary, merge_started_s)
     except StepFailedError as error:
@@ -215,7 +217,7 @@ def merge_task(job_id: str) -> dict[str, Any]:
         if failures:
             horse.lifecycle.fail(job_id, "; ".join(failures))
             return {"failed": failures}
-        with _step("merge"), horse_work_dir(f"{job_id}-merge") as tmp:
+        with _step(MERGE_STEP), horse_work_dir(f"{job_id}-merge") as tmp:
             from worker.render.chunks import merge_chunks
 
             merge_started_s = _start_merge(horse, job_id)

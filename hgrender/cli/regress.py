@@ -114,7 +114,7 @@ def run_suite(
         current_dir = work_dir / entry.key
         result: dict[str, Any] = {"scene": entry.key, "verdict": "error", "reasons": [], "metrics": {}}
         try:
-            render_scene(resolve_scene(entry, seed, limits=settings), current_dir)
+            render_scene(resolve_scene(entry, seed, limits=settings), current_dir, limits=settings)
             baseline = baseline_dir / entry.key
             if (baseline / IMAGE_EXR).is_file():
                 comparison = compare_renders(

@@ -5,11 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hgrender.cli import CliError, positive_int, read_json_file
 from hgrender.cli.progress import ProgressDisplay
 from hgrender.cli.tev import TevImage, add_tev_option
+
+if TYPE_CHECKING:
+    from hgcore.settings import SceneLimits
+    from schemas.scene import Scene
 
 # With --tev and no --chunks, the render is split into this many chunks (at most spp) so that tev shows
 # the image refine as each chunk is added.
@@ -72,18 +76,20 @@ def add_quality_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def load_scene_file(path: Path) -> tuple[dict, Path | None]:
-    """The scene as a JSON dict plus the bundle directory that relative asset paths resolve in."""
+def load_scene_file(path: Path, limits: SceneLimits) -> tuple[Scene, Path | None]:
+    """The scene, validated against ``limits`` (this process's settings), plus the bundle directory that
+    relative asset paths resolve in."""
     if not path.is_file():
         raise CliError(f"scene: no such file {str(path)!r}")
     suffix = path.suffix.lower()
     if suffix == ".json":
-        return read_json_file(path, "scene"), path.parent
+        from schemas.validation import validate_scene
+
+        return validate_scene(read_json_file(path, "scene"), limits), path.parent
     if suffix in (".usda", ".usdc", ".usdz", ".usd", ".zip"):
         from schemas.usd_import import import_usd_isolated
 
-        scene = import_usd_isolated(path, path.parent)
-        return scene.to_json_dict(), path.parent
+        return import_usd_isolated(path, path.parent, limits), path.parent
     raise CliError(f"scene: unsupported file type {suffix!r} (use .json, .usda, .usdc, .usdz or .zip)")
 
 
@@ -94,13 +100,11 @@ def run(args: argparse.Namespace) -> int:
     from worker.mitsuba_setup import configure_mitsuba
 
     settings = Settings()  # this process's one: scene limits, Mitsuba variant and thread count
-    scene, bundle_dir = load_scene_file(args.scene)
+    parsed, bundle_dir = load_scene_file(args.scene, settings)
     configure_mitsuba(args.variant or settings.variant, settings.render_threads)
     from hgcore.noise_target import NoiseTarget
-    from schemas.validation import validate_scene
     from worker.render.chunks import render_scene
 
-    parsed = validate_scene(scene, settings)
     target = NoiseTarget.from_options(args.target_rel_error, args.time_budget_s, args.target_quantile)
     chunks = args.chunks if args.chunks is not None else (TEV_DEFAULT_CHUNKS if args.tev else 1)
     with contextlib.ExitStack() as stack:
@@ -117,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
             chunks=chunks,
             progress=display.update,
             bundle_dir=bundle_dir,
+            limits=settings,
             on_chunk=None if tev is None else lambda sums: tev.show(channels_of_sums(sums, parsed.film)),
             target=target,
         )

@@ -44,7 +44,8 @@ def resolve_scene(
     entry: SuiteScene,
     seed: int,
     job_scene: Callable[[str], dict[str, Any]] | None = None,
-    limits: SceneLimits | None = None,
+    *,
+    limits: SceneLimits,
 ) -> Scene:
     """The scene of a suite entry with its film overrides and ``seed``, validated against ``limits`` (the
     process's settings); ``job_scene`` loads an earlier job's stored scene (service mode only)."""
@@ -80,7 +81,7 @@ class RunService:
         """Resolve every scene once (SceneError / ValueError name the problem), so that a schedule with a
         scene that cannot render is refused when it is created rather than failing at every due time."""
         for entry in suite.scenes:
-            resolve_scene(entry, 0, self.job_scene, self.settings)
+            resolve_scene(entry, 0, self.job_scene, limits=self.settings)
 
     def start_run(
         self,
@@ -96,13 +97,12 @@ class RunService:
         run_id = uuid.uuid4().hex
         seed = run_seed(run_id)
         scenes = [
-            (entry, resolve_scene(entry, seed, self.job_scene, self.settings)) for entry in suite.scenes
+            (entry, resolve_scene(entry, seed, self.job_scene, limits=self.settings))
+            for entry in suite.scenes
         ]
         results = []
         for entry, scene in scenes:
-            view, _ = self.jobs.create(
-                scene.to_json_dict(), owner, name=f"regression {entry.key} (run {run_id[:8]})"
-            )
+            view, _ = self.jobs.create(scene, owner, name=f"regression {entry.key} (run {run_id[:8]})")
             results.append(SceneResult(scene=entry.key, job_id=view.id))
         run = RunView(
             id=run_id,

@@ -1,12 +1,12 @@
 """The coherence a pixel sees depends on the camera: a coated plane under a disk at four apertures.
 
-Scene and closed form: ``tests.render.ensemble`` (a split plane, smooth and rough halves of one film, seen
+Scene and closed form: ``tests.support.ensemble`` (a split plane, smooth and rough halves of one film, seen
 at 45° from 0.3 m; a disk of angular radius α = 0.133 rad in the mirror direction). Lens radii 0 (a
 pinhole), 1, 4 and 12 cm, focused on the plane: cones of angular radius 0.033, 0.133 and 0.4 rad, smaller
 than, equal to and larger than the disk. For each, three renders: ``hg_path`` with the disk an emitter,
 ``rlt`` (the plane-wave ensemble) with the disk an emitter, and ``hg_path`` with the disk a uniformly lit
 diffuse surface (a secondary source, the same light by van Cittert–Zernike). The fringe visibility V̂ of
-each crop (``tests.render.fringes``) is compared with the closed form's.
+each crop (``tests.support.fringes``) is compared with the closed form's.
 
 What must hold (docs/physics_interactions.md §3, "What a pixel sees"):
 * the smooth half passes one direction of the source per ray of the pixel's cone: at a pinhole the
@@ -38,8 +38,8 @@ from pathlib import Path
 import pytest
 
 from schemas import validate_scene
-from tests.render import ensemble
-from tests.render.exr import read_channels, spectral_stack
+from tests.support import ensemble
+from tests.support.exr import read_channels, spectral_stack
 from worker.render.chunks import render_scene
 
 APERTURES_M = (0.0, 0.01, 0.04, 0.12)

@@ -15,6 +15,7 @@ import drjit as dr
 import numpy as np
 import pytest
 
+from hgcore.settings import SceneLimits
 from schemas import validate_scene
 from tests.integrator.furnace import furnace_scene, sphere
 from tests.support.scenes import example
@@ -59,7 +60,7 @@ def rough_glass() -> dict:
 
 def fresh_renderer(scene: dict) -> Renderer:
     """A renderer of its own (``renderer_for`` shares one per scene across tests)."""
-    return Renderer(SceneCompiler(configured_mitsuba()).compile(validate_scene(scene)))
+    return Renderer(SceneCompiler(configured_mitsuba(), limits=SceneLimits()).compile(validate_scene(scene)))
 
 
 SCENES = {**{name: (lambda name=name: small(name)) for name in EXAMPLES}, "rough_glass": rough_glass}
@@ -134,6 +135,7 @@ def test_the_cie_table_interpolates_as_mitsuba() -> None:
 
 RETIRED_RENDERER = """
 import gc, json
+from hgcore.settings import SceneLimits
 from schemas import EXAMPLES_DIR, validate_scene
 from worker.mitsuba_setup import configure_mitsuba
 mi = configure_mitsuba()  # this process's entry point, before the renderer is imported
@@ -142,7 +144,7 @@ from worker.render.scene_compiler import SceneCompiler
 
 scene = json.loads((EXAMPLES_DIR / "cornell_box.json").read_text())
 scene["film"] = {**scene["film"], "width": 16, "height": 16, "spp": 4}
-compiled = lambda: SceneCompiler(mi).compile(validate_scene(scene))
+compiled = lambda: SceneCompiler(mi, limits=SceneLimits()).compile(validate_scene(scene))
 retired = [Renderer(compiled())]
 retired[0].render_sums(4, 1)
 renderer = Renderer(compiled())

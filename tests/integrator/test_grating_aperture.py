@@ -1,7 +1,7 @@
 """A grating's diffraction order seen through a lens: across the streak, the source convolved with the lens
 cone and the lobe.
 
-The DVD of ``tests.render.scenes.dvd_under_sphere`` (camera h = 0.3 m above, looking down; a sphere of
+The DVD of ``tests.support.render_scenes.dvd_under_sphere`` (camera h = 0.3 m above, looking down; a sphere of
 radius R = 1 cm 0.3 m from the centre, at the first order's incidence): the −1st order of each wavelength
 leaves with β_x = sin θ_i − λ/Λ, a rainbow streak along the image's x (world +x); across it (world z, along
 the grating's lines) the order is the mirror image of the source. A pixel at image coordinates
@@ -38,8 +38,8 @@ import numpy as np
 import pytest
 
 from schemas import validate_scene
-from tests.render import scenes
-from tests.render.exr import read_channels, spectral_stack
+from tests.support import render_scenes as scenes
+from tests.support.exr import read_channels, spectral_stack
 from worker.render.chunks import render_scene
 
 SOURCE_RADIUS_M = 0.01

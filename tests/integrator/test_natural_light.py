@@ -23,11 +23,12 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.layout import K_REFERENCE_PER_M
+from hgcore.settings import SceneLimits
 from schemas.photometry import emitter_radiance_scale, evaluate_spectrum
 from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
-from tests.render.images import sky_image, write_image
-from tests.render.reference import image_mean_with_error, path_band_means
+from tests.support.exr import read_channels, spectral_stack
+from tests.support.images import sky_image, write_image
+from tests.support.reference import image_mean_with_error, path_band_means
 from tests.support.sums import assert_bitwise_equal, sums_of
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.chunks import render_scene
@@ -124,7 +125,7 @@ def test_an_hdr_environment_agrees_with_mitsubas_path_on_a_diffuse_sphere(tmp_pa
     variance = read_channels(tmp_path / "out" / "variance.exr")
     ours = image_mean_with_error(bands, np.stack([variance[name] for name in names], axis=-1))
     mi = configured_mitsuba()
-    compiled = SceneCompiler(mi, tmp_path).compile(validate_scene(scene))
+    compiled = SceneCompiler(mi, tmp_path, limits=SceneLimits()).compile(validate_scene(scene))
     reference = path_band_means(mi, compiled, 64, list(range(8)))
     combined = np.sqrt(ours.standard_error**2 + reference.standard_error**2)
     assert np.all(ours.standard_error <= 0.03 * ours.mean)
@@ -201,7 +202,9 @@ def test_passes_with_textures_an_environment_and_a_sun_replay_bitwise(tmp_path: 
         "film_ior": 1.33,
         "substrate": {"conductor": "Ag"},
     }
-    renderer = Renderer(SceneCompiler(configured_mitsuba(), tmp_path).compile(validate_scene(scene)))
+    renderer = Renderer(
+        SceneCompiler(configured_mitsuba(), tmp_path, limits=SceneLimits()).compile(validate_scene(scene))
+    )
     frozen = [sums_of(renderer, seed) for seed in (3, 4, 3)]
     assert renderer.frozen_passes, "the scene's passes could not be recorded"
     renderer.frozen_passes = False

@@ -9,7 +9,7 @@ within the image, and the overall radiometric agreement with ``path`` is
 tests/render/test_reference_path.py's (both renderers agree there to ≈ 0.5 %, within its 3σ; that offset
 would otherwise dominate 192 block z-scores).
 Both normalised images are unbiased estimates of the same block shares up to that ratio's O(1/N) bias, so
-z = Δ/√(SE_hg² + SE_path²) should be standard normal (``tests.render.reference``: hg_path's SE from
+z = Δ/√(SE_hg² + SE_path²) should be standard normal (``tests.support.reference``: hg_path's SE from
 ``variance.exr``, path's from 8 independent renders; the image means' own errors, ≈ 0.2 %, neglected).
 It is a little wider: the *pinhole* pair (hg_path against Mitsuba's ``perspective``) reads mean z² = 1.6 in
 this same comparison (max |z| 3.2), the lens pair 1.4 (max 4.4) — the two renderers' error estimates
@@ -25,9 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.settings import SceneLimits
 from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
-from tests.render.reference import band_box_specfilm
+from tests.support.exr import read_channels, spectral_stack
+from tests.support.reference import band_box_specfilm
 from tests.support.scenes import example
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.chunks import render_scene
@@ -67,7 +68,7 @@ def hg_blocks(scene: dict[str, Any], out: Path) -> tuple[np.ndarray, np.ndarray]
 def path_blocks(scene: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Block means and standard errors of Mitsuba's ``path`` with its ``thinlens`` (4 seeds × 128 spp)."""
     mi = configured_mitsuba()
-    compiled = SceneCompiler(mi).compile(validate_scene(scene))
+    compiled = SceneCompiler(mi, limits=SceneLimits()).compile(validate_scene(scene))
     scene_dict = dict(compiled.reference_dict)
     assert scene_dict["sensor"]["type"] == "thinlens"
     scene_dict["sensor"] = {**scene_dict["sensor"], "film": band_box_specfilm(compiled)}

@@ -23,10 +23,11 @@ from hgcore.artifacts.images import images_from_sums
 from hgcore.artifacts.layout import BandLayout
 from hgcore.colour import linear_srgb_to_lab
 from hgcore.optics.spectra import cie_illuminant
+from hgcore.settings import SceneLimits
 from schemas import build
 from schemas.validation import validate_scene
 from tests.integrator.scenes import plane_under_source
-from tests.render.chi2 import discrete_chi2, sidak_level
+from tests.support.chi2 import discrete_chi2, sidak_level
 from tests.support.scenes import example
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.renderer import Renderer
@@ -144,7 +145,7 @@ def test_sampler_matches_its_density() -> None:
 def _render(scene: dict, mode: str, seed: int):
     scene = {**scene, "film": {**scene["film"], "wavelength_sampling": mode}}
     mi = configured_mitsuba()
-    compiled = SceneCompiler(mi).compile(validate_scene(scene))
+    compiled = SceneCompiler(mi, limits=SceneLimits()).compile(validate_scene(scene))
     sums = Renderer(compiled).render_sums(scene["film"]["spp"], seed)
     return images_from_sums(sums, compiled.bands)
 
@@ -195,7 +196,7 @@ def test_importance_lowers_chroma_variance_under_f11() -> None:
 
 
 def test_cornell_box_under_f11_matches_path(tmp_path: Path) -> None:
-    from tests.render.reference import assert_agreement
+    from tests.support.reference import assert_agreement
 
     scene = example("cornell_box", width=32, height=32, spp=512, bands=8, max_depth=5)
     for emitter in scene["emitters"]:

@@ -3,7 +3,7 @@
 For each material of ``worker.render.materials.MaterialKind`` that samples directions (diffuse, mirror,
 smooth and rough dielectric, rough conductor, thin film on a conductor and on a dielectric, 1-D and 2-D
 gratings; ``black`` absorbs and samples nothing) and for incidence from both sides where the material
-transmits, 2²⁰ ≈ 1.05e6 samples are histogrammed on the sphere (``tests/render/chi2.py``) and compared with
+transmits, 2²⁰ ≈ 1.05e6 samples are histogrammed on the sphere (``tests/support/chi2.py``) and compared with
 the kernels' own ``eval_pdf`` integrated over the cells, scaled by the model's probability of choosing that
 regular component; the Dirac components' probabilities (e^{−g}, R·e^{−g_r} + T·e^{−g_t}, η_00, a film's
 R) come from ``hgcore.optics``. Family level α = 0.01 over all the tests of this module, Šidák-corrected.
@@ -29,8 +29,8 @@ from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.fresnel import fresnel_dielectric
 from hgcore.optics.thin_film import film_reflectance_terms
-from tests.render.chi2 import RegularLobe, SphereGrid, direction_chi2, discrete_chi2, sidak_level
 from tests.render.kernel_harness import MaterialAdapter, material_adapter
+from tests.support.chi2 import RegularLobe, SphereGrid, direction_chi2, discrete_chi2, sidak_level
 
 SAMPLES = 2**20
 ALPHA = 0.01

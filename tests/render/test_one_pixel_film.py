@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.render.reference import hg_band_means
+from tests.support.reference import hg_band_means
 from tests.support.scenes import example
 
 SPP = 256

@@ -1,9 +1,10 @@
 """The paper's experiments as assertions on small renders (issue 3: Figs. 7, 1(f), 8 and 9).
 
-Each test renders through the public API (``worker.render.chunks.render_scene``) and reads the EXRs back. The
-fringe visibility V̂ of a thin film is fitted against the two-beam form of Eq. (18) (``tests.render.fringes``);
-"3σ" margins use the fit's standard errors. Scenes are in ``tests.render.scenes``; the figures printed by
-each test are the measured values quoted in the integrator report.
+Each test renders through the public API (``worker.render.chunks.render_scene``) and reads the EXRs back.
+The fringe visibility V̂ of a thin film is fitted against the two-beam form of Eq. (18)
+(``tests.support.fringes``); "3σ" margins use the fit's standard errors. Scenes are in
+``tests.support.render_scenes``; the figures printed by each test are the measured values quoted in the
+integrator report.
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ from hgcore.colour import ciede2000, linear_srgb_to_lab
 from hgcore.optics.array_ops import NUMPY
 from hgcore.optics.thin_film import film_shear
 from schemas import validate_scene
-from tests.render import ensemble, scenes
-from tests.render.exr import read_channels, spectral_stack
-from tests.render.fringes import FringeFit, fit_fringe_visibility
+from tests.support import ensemble
+from tests.support import render_scenes as scenes
+from tests.support.exr import read_channels, spectral_stack
+from tests.support.fringes import FringeFit, fit_fringe_visibility
 from worker.render.chunks import render_scene
 
 K_REFERENCE_PER_M = 2.0 * math.pi / (LAMBDA_REFERENCE_NM * 1e-9)
@@ -77,7 +79,7 @@ def test_fig7_scene_under_the_cylinder_keeps_the_fringes_its_lobe_passes(tmp_pat
     sees"): the directions that reach the pixel are coherent over ≈ 0.7 µm ≫ the shear, and the fringes stay.
     The plane-wave ensemble (``rlt``, same scene) says the same; ``hg_path`` must agree with it region by
     region within 3 standard errors + the lobe-and-source combination's error (≤ 0.07 for lobes and sources
-    of a size: ``tests.render.ensemble.lobe_and_disk_model_error``), and both must keep the fringes where
+    of a size: ``tests.support.ensemble.lobe_and_disk_model_error``), and both must keep the fringes where
     the paper's reading removed them (V̂ > 0.7 where |n_x| > 0.12; before this change hg_path read 0.3).
     """
     sphere = render(scenes.fig7_coated_sphere(scenes.fig7_sphere_light(), spp=256), tmp_path / "sphere")
@@ -215,7 +217,7 @@ def test_fig8_direct_fringe_visibility_matches_the_plane_wave_ensemble(
     "What a pixel sees"), more coherent than the whole sphere. The plane-wave ensemble of the same scene
     (``rlt``) is the reference; ``hg_path`` combines the lobe and the sphere in closed form
     (``hgcore.optics.acceptance``). Tolerance: 3 standard errors of the two fits plus that combination's
-    error for these sizes (``tests.render.ensemble.lobe_and_disk_model_error``: ≈ 0.07). Measured:
+    error for these sizes (``tests.support.ensemble.lobe_and_disk_model_error``: ≈ 0.07). Measured:
     hg_path 0.53, rlt 0.48; the paper's whole-sphere prediction 0.39 (what hg_path rendered before)."""
     scene = scenes.fig8_coated_plane(via_mirror=False, spp=512)
     scene["film"] = {**scene["film"], "integrator": "rlt"}

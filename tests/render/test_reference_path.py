@@ -5,7 +5,7 @@ spectral radiance as ``path`` (issue 3, "How it is verified"). Both renders are 
 same per-band image mean, so their difference has mean 0 and standard deviation √(SE_hg² + SE_path²) (the
 renders are independent); we require |Δ| ≤ 3·√(SE_hg² + SE_path²) in every band. The seeds are fixed, so
 the outcome is reproducible; for B bands of a correct renderer the chance that some band lies beyond 3σ is
-about B·0.27% (2% for 8 bands). See ``tests.render.reference`` for the standard errors and the film.
+about B·0.27% (2% for 8 bands). See ``tests.support.reference`` for the standard errors and the film.
 Each test also asserts that its standard errors are small enough (≤ 3% of the mean) for the comparison to
 be able to fail on a real bias of a few per cent.
 """
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tests.render.reference import assert_agreement
-from tests.render.scenes import mirror_room
+from tests.support.reference import assert_agreement
+from tests.support.render_scenes import mirror_room
 from tests.support.scenes import example
 
 

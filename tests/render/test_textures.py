@@ -23,10 +23,10 @@ from schemas.errors import SceneError
 from schemas.scene import ImageTexture
 from schemas.textures import check_scene_images
 from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
-from tests.render.images import linear_to_srgb, write_image
+from tests.support.exr import read_channels, spectral_stack
+from tests.support.images import linear_to_srgb, write_image
 from worker.mitsuba_setup import configured_mitsuba
-from worker.render.chunks import render_scene
+from worker.render.chunks import ChunkSpec, render_chunk, render_scene, renderer_for
 from worker.render.scene_compiler import SceneCompiler
 from worker.render.textures import TextureKernels, TextureTable, coefficient_table, srgb_to_linear
 
@@ -339,7 +339,7 @@ def test_texture_coordinates_of_every_source_have_their_origin_bottom_left(tmp_p
     for shape in shapes:
         scene = card_scene({"type": "diffuse", "reflectance": {"type": "image", "path": "t.png"}})
         scene["shapes"] = [shape | {"material": "card"}]
-        compiled = SceneCompiler(mi, tmp_path).compile(validate_scene(scene))
+        compiled = SceneCompiler(mi, tmp_path, limits=SceneLimits()).compile(validate_scene(scene))
         loaded = mi.load_dict(compiled.mitsuba_dict, optimize=False)
         x, y = np.array([0.25, 0.7]), np.array([0.75, 0.1])
         ray = mi.Ray3f(mi.Point3f(x, y, 1.0), mi.Vector3f(0, 0, -1))
@@ -357,14 +357,16 @@ def test_a_mesh_reads_the_uv_set_its_textures_name(tmp_path: Path) -> None:
         {"type": "diffuse", "reflectance": {"type": "image", "path": "t.png", "uv_set": "detail"}}
     )
     scene["shapes"] = [mesh]
-    loaded = mi.load_dict(SceneCompiler(mi, tmp_path).compile(validate_scene(scene)).mitsuba_dict)
+    loaded = mi.load_dict(
+        SceneCompiler(mi, tmp_path, limits=SceneLimits()).compile(validate_scene(scene)).mitsuba_dict
+    )
     uv = np.asarray(loaded.ray_intersect(mi.Ray3f(mi.Point3f(0.5, 0.25, 1), mi.Vector3f(0, 0, -1))).uv)
     np.testing.assert_allclose(uv.ravel(), [1.0, 0.75], atol=1e-6)
     scene["materials"]["card"]["reflectance"]["uv_set"] = "missing"
     with pytest.raises(
         ValueError, match=r"/materials/card/reflectance/uv_set: shape /shapes/0 has no uv set 'missing'"
     ):
-        SceneCompiler(mi, tmp_path).compile(validate_scene(scene))
+        SceneCompiler(mi, tmp_path, limits=SceneLimits()).compile(validate_scene(scene))
 
 
 # ------------------------------------------------------------------------------------------ limits
@@ -430,6 +432,29 @@ def test_texture_limits_name_the_field_and_the_setting(tmp_path: Path) -> None:
     assert message == "image count 2 exceeds the limit of 1 (HGRENDER_MAX_TEXTURES)"
 
 
+def test_a_render_checks_images_against_the_limits_it_is_given(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The renderer's compile checks images against the process's settings it is passed (a worker's),
+    never against ``HGRENDER_*`` variables it would read itself; a scene compiled under other limits is
+    compiled again."""
+    write_image(tmp_path / "big.png", np.zeros((40, 50, 3), np.uint8))
+    scene = validate_scene(textured("big.png"), SceneLimits(max_texture_pixels=2000))
+    monkeypatch.setenv("HGRENDER_MAX_TEXTURE_PIXELS", "1999")  # the environment would refuse the image
+    renderer = renderer_for(scene, tmp_path, limits=SceneLimits(max_texture_pixels=2000))
+    assert renderer.width == 32
+    monkeypatch.setenv("HGRENDER_MAX_TEXTURE_PIXELS", "2000")  # and now would accept it
+    chunk = ChunkSpec(index=0, spp=1, seed=0)
+    strict = SceneLimits(max_texture_pixels=1999)
+    pointer, message = problem_of(
+        lambda: render_chunk(scene, chunk, tmp_path / "c.npz", bundle_dir=tmp_path, limits=strict)
+    )
+    assert pointer == "/materials/card/reflectance/path"
+    assert "exceeds the limit of 1999 (HGRENDER_MAX_TEXTURE_PIXELS)" in message
+    _, message = problem_of(lambda: render_scene(scene, tmp_path / "out", bundle_dir=tmp_path, limits=strict))
+    assert "exceeds the limit of 1999" in message
+
+
 def test_a_scalar_parameter_reads_one_channel() -> None:
     document = film_card({"type": "image", "path": "tau.exr", "channel": "rgb"})
     pointer, message = problem_of(lambda: validate_scene(document))
@@ -450,7 +475,9 @@ def test_a_textured_correlation_length_reads_the_propagating_fraction_of_its_rat
     material = {"type": "rough_conductor", "conductor": "Al", "roughness_rms_um": 0.1, "psd": "abc"}
     material["correlation_length_um"] = {"type": "image", "path": "ell.exr"}
     mi = configured_mitsuba()
-    renderer = Renderer(SceneCompiler(mi, tmp_path).compile(validate_scene(card_scene(material))))
+    renderer = Renderer(
+        SceneCompiler(mi, tmp_path, limits=SceneLimits()).compile(validate_scene(card_scene(material)))
+    )
     branch = next(b for b in renderer.integrator.kernels.branches if isinstance(b, RoughConductor))
     rng = np.random.default_rng(8)
     sin_theta, wavelength_nm = rng.uniform(0.0, 0.97, 3000), rng.uniform(380.0, 780.0, 3000)

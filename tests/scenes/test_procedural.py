@@ -192,7 +192,9 @@ def test_renderer_tangent_on_the_optical_disc_is_radial() -> None:
 
     mi = configured_mitsuba()
     shape = OpticalDiscShape(type="optical_disc", material="m", center_m=[0, 0, 0], normal=[0, 1, 0])
-    scene = mi.load_dict({"type": "scene", "disc": SceneCompiler(mi)._shape_dict(shape)})
+    scene = mi.load_dict(
+        {"type": "scene", "disc": SceneCompiler(mi, limits=SceneLimits())._shape_dict(shape)}
+    )
     angles = np.linspace(0.1, 2 * math.pi, 7)
     for angle in angles:
         x, z = 0.03 * math.cos(angle), 0.03 * math.sin(angle)

@@ -16,7 +16,7 @@ from schemas.photometry import emitter_radiance_scale, luminance_per_radiance_sc
 from schemas.scene import BlackbodySpectrum, MeshShape, RoughConductorMaterial, SphereShape, ThinFilmMaterial
 from schemas.usd_export import scene_to_usd
 from schemas.usd_import import import_usd, import_usd_isolated
-from tests.render.images import write_image
+from tests.support.images import write_image
 
 EXAMPLE_PATHS = sorted(EXAMPLES_DIR.glob("*.json"))
 

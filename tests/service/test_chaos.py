@@ -230,7 +230,7 @@ def test_every_job_succeeds_exactly_once_under_chaos(tmp_path: Path) -> None:
         ):
             assert any(kind in line for line in chaos.log), f"the driver never did {kind}: {chaos.log}"
         assert chaos.api_back_s and max(chaos.api_back_s) <= 10.0
-        counts = {k.decode(): int(v) for k, v in chaos.redis().hgetall("hgrender:jobs:by_state").items()}
+        counts = chaos.jobs().counts_by_state()
         assert {k: v for k, v in counts.items() if v} == {"succeeded": len(job_ids)}  # one transition per job
         artifacts = data_dir / "artifacts" / "jobs"
         for job_id in job_ids:

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from hgcore.artifacts.exr import read_exr
+from hgcore.jobs.keys import job_key, scene_document_key, steps_key
 from hgrender.client import HgrenderClient
 from schemas import EXAMPLES_DIR, validate_scene
 from tests.support.live_service import LiveService
@@ -117,7 +118,7 @@ def test_manifest_lists_artifacts_and_outlives_redis(two_workers: LiveService, t
     entry = next(a for a in manifest["artifacts"] if a["name"] == "image.exr")
     assert entry["sha256"] == hashlib.sha256(image.read_bytes()).hexdigest()
     # Lose the job's Redis state: the API answers from the manifest.
-    two_workers.redis.delete(f"hgrender:job:{job_id}", f"hgrender:job:{job_id}:chunks")
+    two_workers.redis.delete(job_key(job_id), steps_key(job_id))
     recovered = client.get(job_id)
     assert recovered["status"] == "succeeded" and recovered["timings"] == final["timings"]
 
@@ -308,7 +309,7 @@ def test_a_chunk_failing_every_retry_fails_the_job_with_its_error(live_service: 
     service.stop_workers()
     client = service.client()
     job_id = client.submit(tiny_scene(), chunks=1)["id"]
-    service.redis.delete(f"hgrender:job:{job_id}:scene")
+    service.redis.delete(scene_document_key(job_id))
     service.start_worker("f1")
     final = client.wait(job_id, timeout_s=120)
     assert final["status"] == "failed"

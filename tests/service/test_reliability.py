@@ -35,7 +35,7 @@ def post_job(service: LiveService, body: Any, **kwargs: Any) -> httpx.Response:
 
 
 def job_count(service: LiveService) -> int:
-    return int(service.redis.zcard("hgrender:jobs"))
+    return service.jobs.list(None, None, 0, 1)[1]
 
 
 # ---- limits and messages (no workers) -------------------------------------------------------------------

@@ -30,6 +30,7 @@ from hgcore.artifacts.pixel_sums import PartialReader, PixelSums, iter_merged_ro
 from hgcore.artifacts.running_sums import RunningSums
 from hgcore.errors import InputError
 from hgcore.noise_target import ImageErrors, NoiseTarget
+from hgcore.settings import SceneLimits
 from schemas.scene import ABSOLUTE_MAX_SPP, Scene
 from schemas.validation import with_film_overrides
 from worker.mitsuba_setup import configured_mitsuba
@@ -73,11 +74,19 @@ def plan_chunks(total_spp: int, chunk_count: int, base_seed: int) -> list[ChunkS
 _renderers: dict[str, Renderer] = {}
 
 
-def renderer_for(scene: Scene, bundle_dir: Path | None = None) -> Renderer:
-    """A Renderer for ``scene``, reused within a process for identical scenes (load once, kernels cached)."""
-    key = scene.model_dump_json(by_alias=True) + str(bundle_dir)
+def renderer_for(
+    scene: Scene, bundle_dir: Path | None = None, *, limits: SceneLimits | None = None
+) -> Renderer:
+    """A Renderer for ``scene``, reused within a process for identical scenes (load once, kernels cached).
+
+    ``limits``: the process's settings, which the compile checks the scene's images against. Every
+    production caller passes its own (``tests/test_layering.py`` checks it); None reads ``SceneLimits()``
+    from the environment, for tests and benchmarks (which also measure older trees without the argument).
+    """
+    limits = limits if limits is not None else SceneLimits()
+    key = scene.model_dump_json(by_alias=True) + str(bundle_dir) + limits.model_dump_json()
     if key not in _renderers:
-        compiled = SceneCompiler(configured_mitsuba(), bundle_dir).compile(scene)
+        compiled = SceneCompiler(configured_mitsuba(), bundle_dir, limits=limits).compile(scene)
         _renderers.clear()  # one scene at a time keeps worker memory bounded
         _renderers[key] = Renderer(compiled)
     return _renderers[key]
@@ -149,11 +158,13 @@ def render_chunk(
     progress: ProgressCallback | None = None,
     should_stop: Callable[[], bool] | None = None,
     bundle_dir: Path | None = None,
+    limits: SceneLimits | None = None,
 ) -> dict[str, Any]:
     """Render one chunk and stream its per-pixel sums, tile by tile, to ``out_path`` (.npz, atomic).
-    Returns its index, spp, samples, seconds (scene load included) and samples per second."""
+    Returns its index, spp, samples, seconds (scene load included) and samples per second. ``limits``:
+    the process's settings (``renderer_for``)."""
     start = time.perf_counter()
-    renderer = renderer_for(scene, bundle_dir)
+    renderer = renderer_for(scene, bundle_dir, limits=limits)
     with partial_writer(out_path, renderer.width, renderer.height, scene.film.bands) as writer:
         for sums in render_tiles(renderer, [chunk], progress=progress, should_stop=should_stop):
             writer.write_rows(sums)
@@ -246,6 +257,7 @@ def render_to_dir(
     progress: ProgressCallback | None = None,
     should_stop: Callable[[], bool] | None = None,
     bundle_dir: Path | None = None,
+    limits: SceneLimits | None = None,
     on_chunk: Callable[[PixelSums], None] | None = None,
     target: NoiseTarget | None = None,
     on_round: RoundCallback | None = None,
@@ -259,9 +271,10 @@ def render_to_dir(
     memory, which gives the same bits (the same rounded chunk tile sums added in the same order). With a
     ``target``, ``on_round(running, errors, rounds)`` is called after each round that another round
     follows (a running job's preview; the last round's sums become the final artifacts instead); it only
-    reads the sums, so the result is the same with or without it."""
+    reads the sums, so the result is the same with or without it. ``limits``: the process's settings
+    (``renderer_for``)."""
     load_started = time.perf_counter()
-    renderer = renderer_for(scene, bundle_dir)
+    renderer = renderer_for(scene, bundle_dir, limits=limits)
     load_seconds = time.perf_counter() - load_started  # counted as render time, as a chunk's is
     if on_chunk is None and target is None:
         timer = RenderTimer()
@@ -357,13 +370,16 @@ def render_scene(
     chunks: int = 1,
     progress: ProgressCallback | None = None,
     bundle_dir: Path | None = None,
+    limits: SceneLimits | None = None,
     on_chunk: Callable[[PixelSums], None] | None = None,
     target: NoiseTarget | None = None,
 ) -> dict[str, Any]:
     """Render locally and write the final artifacts to ``out_dir`` (``render_to_dir``). With a noise
     ``target``, ``spp`` (or film.spp) is the first round's. ``spp``, ``seed``, ``modes`` and
-    ``integrator`` override the film's (``schemas.with_film_overrides``)."""
-    scene = with_film_overrides(scene, spp=spp, seed=seed, modes=modes, integrator=integrator)
+    ``integrator`` override the film's (``schemas.with_film_overrides``), checked against ``limits``, the
+    process's settings, which the compile also checks the images against (``renderer_for``)."""
+    limits = limits if limits is not None else SceneLimits()
+    scene = with_film_overrides(scene, limits, spp=spp, seed=seed, modes=modes, integrator=integrator)
     plan = plan_chunks(scene.film.spp, chunks, scene.film.seed)
     return render_to_dir(
         scene,
@@ -371,6 +387,7 @@ def render_scene(
         plan,
         progress=progress,
         bundle_dir=bundle_dir,
+        limits=limits,
         on_chunk=on_chunk,
         target=target,
     )

@@ -119,12 +119,14 @@ def _compose(mi: Any, transform: model.Transform | None, own: list[list[float]] 
 
 
 class SceneCompiler:
-    """Builds ``CompiledScene`` objects; ``bundle_dir`` resolves mesh files of uploaded bundles."""
+    """Builds ``CompiledScene`` objects; ``bundle_dir`` resolves mesh files of uploaded bundles;
+    ``limits`` (the process's settings, never re-read from the environment here) bound the images the
+    scene reads."""
 
-    def __init__(self, mi: Any, bundle_dir: Path | None = None, limits: SceneLimits | None = None) -> None:
+    def __init__(self, mi: Any, bundle_dir: Path | None = None, *, limits: SceneLimits) -> None:
         self.mi = mi
         self.bundle_dir = bundle_dir
-        self.limits = limits if limits is not None else SceneLimits()
+        self.limits = limits
         self.grid_nm = grid_wavelengths_nm()
         # Per compile: the images the scene reads (checked from their headers), decoded on first use.
         self._images: dict[str, tuple[Path, ImageHeader]] = {}

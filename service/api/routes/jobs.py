@@ -18,6 +18,7 @@ from hgcore.jobs.views import JobView
 from hgcore.noise_target import NoiseTarget
 from hgcore.settings import SceneLimits
 from hgcore.store.base import ArtifactNotFoundError, validate_key
+from schemas import Scene
 from service.api.deps import (
     AsyncRedisDep,
     JobId,
@@ -52,7 +53,7 @@ _MULTIPART_EXAMPLE = {"scene": "scene.usda", "priority": "normal", "spp": 64, "c
 
 async def _parse_submission(
     request: Request, limits: SceneLimits
-) -> tuple[dict[str, Any], dict[str, bytes], JobOptions]:
+) -> tuple[Scene, dict[str, bytes], JobOptions]:
     """Body → (validated scene, bundle files, options); raises SceneError/ValidationError/ValueError."""
     content_type = request.headers.get("content-type", "")
     if content_type.startswith("multipart/form-data"):
@@ -114,7 +115,7 @@ async def submit_job(
                 options.target_rel_error, options.time_budget_s, options.target_quantile
             ),
             idempotency_key=options.idempotency_key,
-            name=options.name or scene.get("name"),
+            name=options.name or scene.name,
             extra_files=files,
         )
     )

@@ -17,7 +17,7 @@ focus plane at 0.3 m) → reflected directions. Smooth: the directions that hit 
 1. Rough: each ray's lobe over the disk (polar Gauss–Legendre nodes) with the renderer's Harvey–Shack
 weights — the Gaussian PSD S(f)(n/λ)² cos θ_o dω, the specular fraction e^{−g} to the mirror direction —
 and R_coh at each node. Nothing of the HG model enters. Fitting the same visibility V̂
-(``tests.render.fringes``) to the rendered and the closed-form spectra compares them.
+(``tests.support.fringes``) to the rendered and the closed-form spectra compares them.
 
 Quadrature error: halving every node spacing moves V̂ by ≤ 0.0013 at a pinhole and the 1 and 4 cm lenses, and
 by ≈ 0.002 at 12 cm, where the nodes converge as their count squared (rough: 0.4857, 0.4867, 0.4874 with 12,
@@ -43,8 +43,8 @@ from hgcore.optics.complex_pair import ComplexPair
 from hgcore.optics.rough_surface import RoughSurface
 from hgcore.optics.thin_film import film_amplitudes, reflectance_terms
 from schemas import build
-from tests.render import scenes
-from tests.render.fringes import FringeFit, fit_fringe_visibility
+from tests.support import render_scenes as scenes
+from tests.support.fringes import FringeFit, fit_fringe_visibility
 
 INCIDENCE = math.radians(45.0)
 DISTANCE_M = 0.3  # camera → plane centre, plane centre → disk centre
@@ -299,7 +299,7 @@ def rough_spectrum(aperture_radius_m: float, *, fine: bool = False) -> np.ndarra
 
 
 def visibility(spectrum: np.ndarray) -> FringeFit:
-    """V̂ of a crop's summed band spectrum (``tests.render.fringes``), at the 45° incidence."""
+    """V̂ of a crop's summed band spectrum (``tests.support.fringes``), at the 45° incidence."""
     return fit_fringe_visibility(
         spectrum,
         band_edges_nm(),

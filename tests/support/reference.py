@@ -24,8 +24,9 @@ from typing import Any
 
 import numpy as np
 
+from hgcore.settings import SceneLimits
 from schemas.validation import validate_scene
-from tests.render.exr import read_channels, spectral_stack
+from tests.support.exr import read_channels, spectral_stack
 from worker.mitsuba_setup import configured_mitsuba
 from worker.render.chunks import render_scene
 from worker.render.scene_compiler import CompiledScene, SceneCompiler
@@ -98,7 +99,7 @@ def hg_band_means(scene: dict[str, Any], out_dir: Path, seed: int) -> BandMeans:
 
 def assert_agreement(scene: dict[str, Any], out_dir: Path, path_spp: int) -> None:
     mi = configured_mitsuba()
-    compiled = SceneCompiler(mi).compile(validate_scene(scene))
+    compiled = SceneCompiler(mi, limits=SceneLimits()).compile(validate_scene(scene))
     ours = hg_band_means(scene, out_dir, seed=11)
     reference = path_band_means(mi, compiled, path_spp, PATH_SEEDS)
     combined = np.sqrt(ours.standard_error**2 + reference.standard_error**2)
