@@ -29,12 +29,16 @@ GOAL = 1.5
 
 def _renders(name: str, modes: int, folder: Path) -> Any:
     """``render_sums`` of the example ``name`` at ``modes`` modes, as a function of the seed."""
+    from hgcore.settings import SceneLimits
     from worker.render.renderer import Renderer
     from worker.render.scene_compiler import SceneCompiler
 
     scene = json.loads((EXAMPLES_DIR / f"{name}.json").read_text())
     scene["film"] = {**scene["film"], "width": SIZE_PX, "height": SIZE_PX, "spp": SPP, "modes": modes}
-    renderer = Renderer(SceneCompiler(configured_mitsuba(), folder).compile(validate_scene(scene)))
+    limits = SceneLimits()  # this benchmark's process settings
+    compiler = SceneCompiler(configured_mitsuba(), folder, limits=limits)
+    compiled = compiler.compile(validate_scene(scene, limits))
+    renderer = Renderer(compiled)
     return lambda seed: renderer.render_sums(SPP, seed)
 
 
