@@ -114,7 +114,7 @@ def test_a_pass_that_cannot_be_recorded_renders_unfrozen(caplog: pytest.LogCaptu
         spectra = renderer.integrator.context.spectra_flat
         return [table for table in tables if table is not spectra], settings
 
-    renderer._frozen_pass = dr.freeze(renderer._pass_columns, state_fn=state_without_the_spectra)
+    renderer._new_frozen_pass = lambda: dr.freeze(renderer._pass_columns, state_fn=state_without_the_spectra)
     with caplog.at_level(logging.WARNING, logger="worker.render.renderer"):
         unfrozen = sums_of(renderer, 6)
     assert not renderer.frozen_passes

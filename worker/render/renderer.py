@@ -17,9 +17,11 @@ of Python per pass, 2 % of a 128² × 64 spp Cornell box's CPU time) and records
 later passes of the same shape (rows, spp) replay them with the new seed. A recording names what its
 kernels read: the scene, the seed and the tile's first row (opaque arguments), every table of the
 integrator, materials and wavelength sampler (``_pass_state``, each owner's ``kernel_tables``), and the
-Python settings the trace depends on (``_trace_settings``: a change records again, in a frozen function of
-its own, since Dr.Jit's own comparison of those Python values missed a change of ``max_depth`` from 8 to 2
-with drjit 1.5). Replays are bitwise the traced passes
+Python settings the trace depends on (``_trace_settings``). Each pass shape (rows, spp) under each
+settings tuple has a frozen function of its own (``_frozen_pass_for``): Dr.Jit 1.5's own comparison of the
+Python values in its key missed a change of ``max_depth`` from 8 to 2, and in the full test suite replayed
+another shape's recording for a noise-target round (a round's image differed from the same chunks'). Replays
+are bitwise the traced passes
 (tests/integrator/test_frozen_passes.py); a scene whose kernels read an array no owner names cannot be
 recorded, and renders unfrozen (with a warning) rather than not at all.
 """
@@ -30,6 +32,7 @@ import contextlib
 import gc
 import logging
 import math
+from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -149,8 +152,9 @@ class Renderer:
         self._band_luminance = image_xyz_weights(compiled.bands.edges_nm)[:, 1].tolist()
         #: whether passes replay recorded kernels (module docstring, "Frozen passes")
         self.frozen_passes = True
-        self._frozen_settings = self._trace_settings()
-        self._frozen_pass = self._new_frozen_pass()
+        # One frozen function per pass shape and settings (``_frozen_pass_for``), the most recent last.
+        self._frozen_passes: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+        self._frozen_pass: Any = None  # the last pass's (tests read its recordings)
 
     def _context(self) -> RenderContext:
         mi = self.mi
@@ -298,9 +302,7 @@ class Renderer:
         # the recording), so that every pass and tile compiled (and recorded) its own copy.
         arguments = (self.scene, dr.opaque(mi.UInt32, seed), dr.opaque(mi.UInt32, y0), y1 - y0, spp)
         if self.frozen_passes:
-            settings = self._trace_settings()
-            if settings != self._frozen_settings:
-                self._frozen_settings, self._frozen_pass = settings, self._new_frozen_pass()
+            self._frozen_pass = self._frozen_pass_for(y1 - y0, spp)
             try:
                 with _collector_paused():
                     return self._frozen_pass(*arguments)
@@ -310,6 +312,21 @@ class Renderer:
                 log.warning("render passes of this scene run unfrozen: %s", str(error).splitlines()[0])
                 self.frozen_passes = False
         return self._pass_columns(*arguments)
+
+    def _frozen_pass_for(self, rows: int, spp: int) -> Any:
+        """The frozen pass of this shape (``rows``, ``spp``) under the current ``_trace_settings``: one
+        frozen function per key, each recording only arguments whose Python values never change, so no
+        replay depends on Dr.Jit's comparison of Python values (module docstring). At most
+        ``FROZEN_PASS_SHAPES`` are kept, the least recently used dropped (outside any frozen call)."""
+        key = (self._trace_settings(), rows, spp)
+        frozen = self._frozen_passes.get(key)
+        if frozen is None:
+            frozen = self._frozen_passes[key] = self._new_frozen_pass()
+            while len(self._frozen_passes) > FROZEN_PASS_SHAPES:
+                self._frozen_passes.popitem(last=False)
+        else:
+            self._frozen_passes.move_to_end(key)
+        return frozen
 
     def _new_frozen_pass(self) -> Any:
         """A frozen ``_pass_columns`` (module docstring, "Frozen passes") for the current settings."""
