@@ -95,7 +95,10 @@ class Chaos:
         self.seen.add(pid)
         self.seen.update(c for w in self.workers() for c in children_of(w))
         self.log.append(f"{time.monotonic():.1f} {sig.name} {what} {pid}")
-        os.kill(pid, sig)
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:  # it ended by itself since it was found (a horse finishing its chunk)
+            self.log.append(f"{time.monotonic():.1f} {what} {pid} had already exited")
 
     def _wait_for_target(
         self, rng: random.Random, find: Callable[[], list[int]], what: str, timeout_s: float = 30.0

@@ -237,5 +237,8 @@ def test_make_serve_starts_and_a_ctrl_c_stops_it_quietly(tmp_path: Path) -> None
     # over half of a serve.log) is logged at DEBUG, while the worker's own lines are there.
     assert "rq.worker" in text, text[-2000:]
     assert "cleaning registries" not in text and "cleaning group registries" not in text, text[-2000:]
-    # make ends by the signal it was sent (its shell sees an interrupted command, as it should).
-    assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGINT
+    # make ends quietly either way the race between its own SIGINT and its recipe goes: killed by the
+    # signal it was sent (it saw the interrupt first), or exiting 0 (the recipe's `|| [ $? -eq 130 ]`
+    # returned first; seen in a fresh-clone CI run).
+    interrupted = os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGINT
+    assert interrupted or (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0), status
