@@ -79,16 +79,16 @@ GALLERY: tuple[GalleryEntry, ...] = (
         "10 000 spp, ~4 hours",
         "The same shell under a 60 cm × 0.1 cm F7 tube (same spectrum and power) along x at the same "
         "place: its coherence is long across its axis (ℓ₁ ≈ 24 µm) and short along it (ℓ₂ = 0.087 µm = "
-        "r√12/(kL), Eq. 14, as measured), below the film's shear (0.13 µm transverse at 45°), so Eq. 18 "
-        "keeps the fringes only where the normal is perpendicular to the axis: the emerald-green band "
-        "survives only in the middle of the shell's crest and fades to a grey-lavender towards both ends, "
-        "where the normal tilts along the tube. Measured against bare silver rendered with the same paths, "
-        "the film's colour under the tube is 0.88 ± 0.07 of the sphere's on the crest (|n_x| < 0.15) and "
-        "0.34 ± 0.03 on the flanks (|n_x| ≥ 0.3), either side of the coherence prediction 0.58 at "
-        "|n_x| = 0.3; the flanks keep the absorbing coating's incoherent tint (5–6 CIELAB units from bare "
-        "silver, against 20–80 for its fringes), not its fringes. The fine coloured speckle is Monte "
-        "Carlo noise of the tube's sampling (each sample carries 4 wavelengths). Open it in the viewer: "
-        "the ellipses show the anisotropy (ℓ₁/ℓ₂ ≈ 290).",
+        "r√12/(kL), Eq. 14, as measured), below the film's shear (0.13 µm transverse at 45°). The paper's "
+        "Eq. 18 (the whole tube's Σ⊥) would keep the fringes only where the normal is perpendicular to "
+        "the axis. At this pinhole camera a pixel receives only the tube directions the coating's lobe "
+        "passes (±0.34 rad of the ±1.2 rad tube, docs/physics_interactions.md §3), over which the light "
+        "is coherent far beyond the shear: the emerald-green band runs along the whole crest, end to end, "
+        "and the flanks keep their colours too. Measured against bare silver rendered with the same paths "
+        "(96², 64 spp), the film's colour under the tube is 1.06 ± 0.08 of the sphere's on the crest "
+        "(|n_x| < 0.15) and 1.75 ± 0.14 on the flanks (|n_x| ≥ 0.3), where the paper's reading fades it "
+        "below 0.58. The fine coloured speckle is Monte Carlo noise of the tube's sampling (each sample "
+        "carries 4 wavelengths). Open it in the viewer: the ellipses show the anisotropy (ℓ₁/ℓ₂ ≈ 290).",
         "ellipses",
     ),
     GalleryEntry(
