@@ -252,8 +252,14 @@ class RenderWorker(Worker):
         self.executing = None
 
     def fork_work_horse(self, job: Job, queue: Queue) -> None:
+        """RQ's fork; then the parent also puts the horse in a process group of its own. RQ's horse calls
+        ``setpgrp`` itself, but a stop (a cancel) that comes before it has run would make ``kill_horse``'s
+        ``killpg(getpgid(horse))`` kill the worker's own group — the worker with it, and every job queued
+        after it waits for a worker that is gone (seen in CI). Both sides calling it is the usual fix."""
         self._worker_pid = os.getpid()
         super().fork_work_horse(job, queue)
+        with contextlib.suppress(ProcessLookupError, PermissionError):  # gone, or already its own leader
+            os.setpgid(self.horse_pid, self.horse_pid)
         self._last_horse_pid = self.horse_pid
 
     def main_work_horse(self, job: Job, queue: Queue) -> None:

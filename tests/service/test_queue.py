@@ -345,3 +345,29 @@ def test_a_worker_killed_while_cleaning_blocks_recovery_for_seconds_not_minutes(
         assert live_service.redis.ttl(plain.registry_cleaning_key) > 60  # what RQ alone would leave behind
     finally:
         live_service.redis.delete(queue.registry_cleaning_key)
+
+
+def test_a_stop_right_after_the_fork_cannot_reach_the_worker_s_group(
+    live_service: LiveService, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """RQ's horse puts itself in its own process group (``setpgrp``) after the fork; a cancel that came
+    first made ``kill_horse``'s ``killpg(getpgid(horse))`` kill the worker's group (the worker died and
+    every job queued after it waited for ever; CI). The worker's fork sets the horse's group from the
+    parent too: here the horse never calls ``setpgrp`` (patched out, as if it had not run yet), and its
+    group is still its own, not the worker's (the test process's)."""
+    from types import SimpleNamespace
+
+    from worker.queue_worker import RenderWorker, build_worker
+
+    worker = build_worker(live_service.settings, live_service.redis, name="fork-probe")
+    monkeypatch.setenv("RQ_WORKER_ID", "unset")  # RQ's fork writes both; monkeypatch restores them
+    monkeypatch.setenv("RQ_JOB_ID", "unset")
+    monkeypatch.setattr(os, "setpgrp", lambda: None)
+    monkeypatch.setattr(RenderWorker, "main_work_horse", lambda self, job, queue: time.sleep(30))
+    worker.fork_work_horse(SimpleNamespace(id="fork-probe-job"), None)
+    horse = worker.horse_pid
+    try:
+        assert os.getpgid(horse) == horse != os.getpgrp()
+    finally:
+        os.kill(horse, signal.SIGKILL)
+        os.waitpid(horse, 0)
