@@ -57,7 +57,7 @@ import redis
 from redis.backoff import ExponentialBackoff
 from redis.retry import Retry
 from rq import Queue, Worker
-from rq.exceptions import AbandonedJobError
+from rq.exceptions import AbandonedJobError, InvalidJobOperation, NoSuchJobError
 from rq.executions import Execution
 from rq.job import Job, JobStatus
 from rq.registry import StartedJobRegistry
@@ -356,7 +356,13 @@ class RenderWorker(Worker):
         Only a job still marked started is requeued: one that finished (or failed) before its horse
         died must not run again. It is enqueued before its execution leaves the StartedJobRegistry, so a
         crash in between leaves it queued (the registry's cleanup ignores jobs no longer started)."""
-        if job.get_status(refresh=True) != JobStatus.STARTED:
+        try:
+            status = job.get_status(refresh=True)
+        except (InvalidJobOperation, NoSuchJobError):
+            # Deleted meanwhile (a canceled job its owner removed; RQ then fails to enqueue its dependents
+            # and quits its loop): there is nothing to hand back, and raising here killed the worker.
+            return
+        if status != JobStatus.STARTED:
             return
         queue.enqueue_job(job, at_front=True)
         with self.connection.pipeline() as pipeline:
@@ -440,8 +446,9 @@ def run_worker(settings: Settings, *, burst: bool = False, name: str | None = No
 
 def recover_after_outage(worker: RenderWorker, probe: redis.Redis) -> None:
     """After ``worker.work`` ended without a stop request (Redis was gone for longer than the client
-    retries): stop its horse and scheduler, wait for Redis, hand the chunk it held back to its queue and
-    record the worker's death, so a fresh worker of the same name can register."""
+    retries, or RQ quit on an unhandled exception, e.g. a job deleted while its stop was handled): stop
+    its horse and scheduler, wait for Redis, hand the chunk it held back to its queue and record the
+    worker's death, so a fresh worker of the same name can register."""
     executing, execution = worker.executing, worker.execution
     if worker.horse_pid:
         worker.kill_horse()

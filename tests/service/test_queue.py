@@ -371,3 +371,22 @@ def test_a_stop_right_after_the_fork_cannot_reach_the_worker_s_group(
     finally:
         os.kill(horse, signal.SIGKILL)
         os.waitpid(horse, 0)
+
+
+def test_handing_back_a_deleted_job_does_not_kill_the_worker(live_service: LiveService) -> None:
+    """Canceling a running chunk and deleting its job at once (the viewer's job list does both): RQ fails
+    to enqueue the dependents of the deleted job and quits its loop; the worker's recovery then handed the
+    chunk back, whose status read raised for the missing job and killed the worker, so every later job
+    stayed queued (a fresh-clone CI run). A deleted job has nothing to hand back."""
+    from rq import Queue
+    from rq.job import Job
+
+    from worker.queue_worker import build_worker
+
+    worker = build_worker(live_service.settings, live_service.redis, name="hand-back-probe")
+    queue = Queue("low", connection=live_service.redis)
+    job = Job.create(func="builtins.print", connection=live_service.redis, origin=queue.name)
+    job.save()
+    job.delete()
+    worker.hand_back(job, queue, None)  # raised rq.exceptions.InvalidJobOperation before
+    assert queue.count == 0
