@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -90,10 +90,14 @@ class VisibilityModel:
         every source is the Gaussian (``None``, the cheaper closed form)."""
         if len(self.disk_coefficients) == 1:
             return LobeModes(None, None, False)
-        rect = None
-        if self.rect_coefficients != self.disk_coefficients and self.rect_sources:
-            rect = self.rect_coefficients if coherence.rect_modes is None else coherence.rect_modes
-        return LobeModes(self.disk_coefficients, rect, coherence.rect_source)
+        return LobeModes(self.disk_coefficients, self._rect_modes(coherence), coherence.rect_source)
+
+    def _rect_modes(self, coherence: IncidentCoherence) -> dict[tuple[int, int], Any] | None:
+        """The rectangle's coefficients for the light ``coherence`` describes (a cylinder's own, per lane,
+        where it has them), or None where they equal the disk's (one mode) or no source is a rectangle."""
+        if self.rect_coefficients == self.disk_coefficients or not self.rect_sources:
+            return None
+        return self.rect_coefficients if coherence.rect_modes is None else coherence.rect_modes
 
     def degree(
         self,
@@ -108,10 +112,8 @@ class VisibilityModel:
         r = 1 this is the angular form: C in rad² (``hgcore.optics.acceptance``)."""
         mu = degree_of_coherence(xi, sigma, distance_m, wavelength_m, self.disk_coefficients, OPS)
         # With one mode both expansions are the same Gaussian: evaluate the rectangle's only when it differs.
-        if self.rect_coefficients != self.disk_coefficients and self.rect_sources:
-            rect_coefficients = (
-                self.rect_coefficients if coherence.rect_modes is None else coherence.rect_modes
-            )
+        rect_coefficients = self._rect_modes(coherence)
+        if rect_coefficients is not None:
             mu_rect = degree_of_coherence(xi, sigma, distance_m, wavelength_m, rect_coefficients, OPS)
             mu = dr.select(coherence.rect_source, mu_rect, mu)
         return mu
