@@ -167,15 +167,18 @@ def gaussian_density(dx: Any, dy: Any, covariance: tuple[Any, Any, Any], ops: Ar
     return ops.exp(-0.5 * quadratic) / (2.0 * math.pi * ops.sqrt(determinant))
 
 
-def blurred_mode_factors(degree: int, inverse_sigma: Any, rho: Any) -> dict[tuple[int, int], Any]:
-    """(n, k) → (1/σ)^k ρ^j 2^{−j} √(n!/k!)/j!, k = n − 2j: h_n blurred by the intrinsic Gaussian along one
-    axis as a sum of h_k(y) (module docstring; the common factor 1/σ left out)."""
-    factors: dict[tuple[int, int], Any] = {}
+def blurred_mode_factors(degree: int, inverse_sigma: Any, rho: Any) -> list[list[tuple[int, Any]]]:
+    """Per n ≤ ``degree``, the (k, (1/σ)^k ρ^j 2^{−j} √(n!/k!)/j!) with k = n − 2j: h_n blurred by the
+    intrinsic Gaussian along one axis as a sum of h_k(y) (module docstring; the common factor 1/σ left
+    out)."""
+    factors: list[list[tuple[int, Any]]] = []
     for n in range(degree + 1):
+        terms = []
         for j in range(n // 2 + 1):
             k = n - 2 * j
             constant = math.sqrt(math.factorial(n) / math.factorial(k)) / (math.factorial(j) * 2.0**j)
-            factors[(n, k)] = constant * inverse_sigma**k * rho**j
+            terms.append((k, constant * inverse_sigma**k * rho**j))
+        factors.append(terms)
     return factors
 
 
@@ -209,12 +212,9 @@ class ModalLobe:
         blurred: dict[tuple[int, int], Any] = {}
         for (n, m), value in coefficients.items():
             signed = -value if ((n + m) // 2) % 2 else value
-            for (n_major, k), factor_major in major.items():
-                if n_major != n:
-                    continue
-                for (m_minor, ell), factor_minor in minor.items():
-                    if m_minor == m:
-                        blurred[(k, ell)] = blurred.get((k, ell), 0.0) + signed * factor_major * factor_minor
+            for k, factor_major in major[n]:
+                for ell, factor_minor in minor[m]:
+                    blurred[(k, ell)] = blurred.get((k, ell), 0.0) + signed * factor_major * factor_minor
         self.blurred = blurred
 
     def density(self, dx: Any, dy: Any) -> Any:
